@@ -1,0 +1,247 @@
+"""The one interface every matcher shares: prepare once per target, then score images.
+
+A matcher returns a score (higher = more likely the target) and the image points where
+it believes the target is, each with its own score, and never applies a threshold: the
+caller picks sigma, so one scoring pass serves every threshold, curve and tuning run.
+The base class checks every result, so a broken plug-in fails loudly and by name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any, ClassVar
+
+import numpy as np
+
+from pin_match.crops import POLICIES, Crop, crop_boxes
+from pin_match.frameset import Target
+
+
+class Modality(str, Enum):
+    VISUAL = "visual"      # reference views only
+    TEXTUAL = "textual"    # descriptions only
+    CATEGORY = "category"  # may read the category label (an ablation in the paper)
+
+
+class MatcherError(RuntimeError):
+    """A matcher was misused or produced an invalid result."""
+
+
+class ConfigError(ValueError):
+    """An unknown or ill-typed configuration key."""
+
+
+@dataclass
+class MatcherConfig:
+    """Settings shared by every matcher; subclasses add their own fields.
+
+    Fields whose metadata says ``hash=False`` do not change results and stay out of the
+    config hash that names caches and score tables.
+    """
+
+    crops: str = "pin"
+    weights: str | None = field(default=None, metadata={"help": "local file or folder overriding the hub weights"})
+    device: str = field(default="cpu", metadata={"hash": False})
+
+    def __post_init__(self) -> None:
+        if self.crops not in POLICIES:
+            raise ConfigError(f"crops={self.crops!r}: choose one of {POLICIES}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def hashed_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.metadata.get("hash", True)}
+
+
+def _point_array(a: Any) -> np.ndarray:
+    return np.asarray(a, dtype=np.float32).reshape(-1, 2) if a is not None else np.zeros((0, 2), np.float32)
+
+
+@dataclass
+class MatchResult:
+    """One image's verdict; ``points_at(sigma)`` recovers the coordinates for any threshold."""
+
+    score: float
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))  # (K, 2) x, y
+    point_scores: np.ndarray | None = None   # (K,); None = every point carries the frame score
+    crop_scores: np.ndarray | None = None    # one score per crop of the crop policy
+    heatmap: np.ndarray | None = None        # low-resolution score map (per crop: n_crops x h x w)
+    boxes: np.ndarray | None = None          # (M, 4) x0, y0, x1, y1 in image pixels
+    box_scores: np.ndarray | None = None     # (M,)
+
+    def __post_init__(self) -> None:
+        self.points = _point_array(self.points)
+        if self.point_scores is not None:
+            self.point_scores = np.asarray(self.point_scores, dtype=np.float32).reshape(-1)
+
+    def scores_of_points(self) -> np.ndarray:
+        if self.point_scores is None:
+            return np.full(len(self.points), self.score, np.float32)
+        return self.point_scores
+
+    def points_at(self, sigma: float) -> np.ndarray:
+        """The target's coordinates under threshold sigma (empty when the frame is not matched)."""
+        if self.score < sigma:
+            return np.zeros((0, 2), np.float32)
+        return self.points[self.scores_of_points() >= sigma]
+
+
+class Matcher(ABC):
+    """Base class: subclasses implement ``_prepare`` and ``_match_batch``.
+
+    Class attributes describe the method for the registry, ``pin-match list`` and the docs.
+    Bump ``version`` whenever the algorithm changes results, so stale caches are not reused.
+    """
+
+    name: ClassVar[str] = ""
+    Config: ClassVar[type[MatcherConfig]] = MatcherConfig
+    modality: ClassVar[Modality] = Modality.VISUAL
+    default_sigma: ClassVar[float] = 0.5
+    hub_id: ClassVar[str | None] = None
+    license: ClassVar[str] = ""
+    paper: ClassVar[str] = ""
+    version: ClassVar[int] = 1
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        self.cfg = cfg if cfg is not None else self.Config()
+        if not isinstance(self.cfg, self.Config):
+            raise ConfigError(f"{self.display_name}: config must be {self.Config.__name__}, got "
+                              f"{type(self.cfg).__name__}")
+        self._target: Target | None = None
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def display_name(self) -> str:
+        return self.name or type(self).__name__
+
+    @property
+    def config_hash(self) -> str:
+        payload = dict(matcher=self.display_name, version=self.version, config=self.cfg.hashed_dict())
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+    @property
+    def id(self) -> str:
+        """Registry name plus config hash, e.g. ``dinov2@3f9a1c2b7d10``."""
+        return f"{self.display_name}@{self.config_hash}"
+
+    # ------------------------------------------------------------------ public API
+    def prepare(self, target: Target) -> None:
+        """Build everything derived from the target once (prototypes, text features, keypoints)."""
+        if self.modality is not Modality.CATEGORY:
+            target = dataclasses.replace(target, category="")  # the label is off limits
+        self._prepare(target)
+        self._target = target
+
+    def match(self, image: np.ndarray) -> MatchResult:
+        return self.match_batch([image])[0]
+
+    def match_batch(self, images: Sequence[np.ndarray]) -> list[MatchResult]:
+        if self._target is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) before match()")
+        images = [self._check_image(im, i) for i, im in enumerate(images)]
+        results = self._match_batch(images)
+        if len(results) != len(images):
+            raise MatcherError(f"matcher {self.display_name} returned {len(results)} results for "
+                               f"{len(images)} images")
+        for image, result in zip(images, results):
+            self._validate(result, image.shape[0], image.shape[1])
+        return results
+
+    def embed_reference(self, view: np.ndarray) -> np.ndarray:
+        """A global embedding of one RGBA reference (the paper's similarity analysis)."""
+        raise MatcherError(f"matcher {self.display_name} has no global embedding for the similarity analysis")
+
+    # ------------------------------------------------------------------ to implement
+    @abstractmethod
+    def _prepare(self, target: Target) -> None: ...
+
+    @abstractmethod
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]: ...
+
+    # ------------------------------------------------------------------ checks
+    def _check_image(self, image: np.ndarray, index: int) -> np.ndarray:
+        image = np.asarray(image)
+        if image.ndim == 2:  # grayscale frames are accepted and expanded
+            image = np.repeat(image[:, :, None], 3, axis=2)
+        if image.ndim != 3 or image.shape[2] not in (3, 4) or image.dtype != np.uint8:
+            raise MatcherError(f"matcher {self.display_name}: image {index} must be H x W x 3 uint8, got "
+                               f"{image.shape} {image.dtype}")
+        if image.shape[0] < 8 or image.shape[1] < 8:
+            raise MatcherError(f"matcher {self.display_name}: image {index} is too small ({image.shape[:2]})")
+        return np.ascontiguousarray(image[:, :, :3])
+
+    def _validate(self, r: MatchResult, height: int, width: int) -> None:
+        who = f"matcher {self.display_name}"
+        if not isinstance(r, MatchResult):
+            raise MatcherError(f"{who} returned {type(r).__name__}, expected MatchResult")
+        if not isinstance(r.score, (float, int, np.floating, np.integer)) or not math.isfinite(float(r.score)):
+            raise MatcherError(f"{who} returned a non-finite score {r.score!r}")
+        r.score = float(r.score)
+        if not np.isfinite(r.points).all():
+            raise MatcherError(f"{who} returned non-finite points")
+        if len(r.points):
+            x, y = r.points[:, 0], r.points[:, 1]
+            if (x < 0).any() or (y < 0).any() or (x >= width).any() or (y >= height).any():
+                raise MatcherError(f"{who} returned points outside the {width}x{height} image")
+        if r.point_scores is not None:
+            if r.point_scores.shape != (len(r.points),):
+                raise MatcherError(f"{who}: {len(r.point_scores)} point scores for {len(r.points)} points")
+            if not np.isfinite(r.point_scores).all():
+                raise MatcherError(f"{who} returned non-finite point scores")
+        if r.crop_scores is not None and not np.isfinite(r.crop_scores).all():
+            raise MatcherError(f"{who} returned non-finite crop scores")
+        if r.boxes is not None:
+            r.boxes = np.asarray(r.boxes, np.float32).reshape(-1, 4)
+            if r.box_scores is None or len(r.box_scores) != len(r.boxes):
+                raise MatcherError(f"{who}: boxes need one box score each")
+
+
+class CropMatcher(Matcher):
+    """A matcher that sees the frame through the configured crop policy.
+
+    Subclasses implement ``_match_crops``, which receives every crop of the whole batch
+    at once (so a backbone runs one batch) and returns results in crop pixel coordinates;
+    this class maps points back to the frame and takes the max over crops.
+    """
+
+    @abstractmethod
+    def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]: ...
+
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        plans = [crop_boxes(im.shape[0], im.shape[1], self.cfg.crops) for im in images]
+        flat = [np.ascontiguousarray(c.take(im)) for im, boxes in zip(images, plans) for c in boxes]
+        crop_results = self._match_crops(flat)
+        if len(crop_results) != len(flat):
+            raise MatcherError(f"matcher {self.display_name} returned {len(crop_results)} results for "
+                               f"{len(flat)} crops")
+        out, k = [], 0
+        for boxes in plans:
+            parts = crop_results[k:k + len(boxes)]
+            k += len(boxes)
+            out.append(merge_crop_results(parts, boxes))
+        return out
+
+
+def merge_crop_results(parts: Sequence[MatchResult], boxes: Sequence[Crop]) -> MatchResult:
+    """Frame score = max over crops; points of all crops, mapped into frame pixels."""
+    scores = np.array([float(p.score) for p in parts], np.float32)
+    points = np.concatenate([b.to_frame(p.points) for p, b in zip(parts, boxes)]) if parts else np.zeros((0, 2))
+    point_scores = np.concatenate([p.scores_of_points() for p in parts]).astype(np.float32)
+    heatmaps = [p.heatmap for p in parts]
+    heatmap = np.stack(heatmaps) if all(h is not None for h in heatmaps) and \
+        len({h.shape for h in heatmaps}) == 1 else None
+    boxes_out, box_scores = None, None
+    if any(p.boxes is not None for p in parts):
+        boxes_out = np.concatenate([p.boxes.reshape(-1, 4) + np.array([b.x0, b.y0, b.x0, b.y0], np.float32)
+                                    for p, b in zip(parts, boxes) if p.boxes is not None])
+        box_scores = np.concatenate([p.box_scores for p in parts if p.boxes is not None])
+    return MatchResult(score=float(scores.max()), points=points.astype(np.float32), point_scores=point_scores,
+                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores)

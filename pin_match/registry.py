@@ -1,0 +1,149 @@
+"""Find matchers by name: built-ins, anything decorated in a loaded module, and entry points.
+
+Built-ins are listed here by module, so a name never fails because its module was not
+imported, and heavy libraries (torch, timm) load only when such a matcher is asked for.
+Third-party packages add matchers through the ``pin_match.matchers`` entry-point group.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import fnmatch
+import importlib
+import types
+import typing
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from typing import Any
+
+from pin_match.matcher import ConfigError, Matcher, MatcherConfig
+
+ENTRY_POINT_GROUP = "pin_match.matchers"
+
+# name -> module that registers it on import
+BUILTINS: dict[str, str] = {
+    "sift": "matchers.classic",
+    "color": "matchers.classic",
+    "template": "matchers.classic",
+    "dino": "matchers.patch",
+    "dinov2": "matchers.patch",
+    "clip": "matchers.patch",
+    "clip-text": "matchers.patch",
+    "superglue": "matchers.keypoint",
+    "lightglue": "matchers.keypoint",
+    "ieve": "matchers.keypoint",
+    "clip-grad": "matchers.clip_grad",
+    "owl": "matchers.owl",
+    "owl-image": "matchers.owl",
+    "persam": "matchers.persam",
+    "persam-f": "matchers.persam",
+}
+
+_REGISTRY: dict[str, type[Matcher]] = {}
+
+
+class UnknownMatcherError(KeyError):
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Matcher]], type[Matcher]]:
+    """Class decorator: ``@register_matcher("sift")`` makes the class reachable by name."""
+
+    def deco(cls: type[Matcher]) -> type[Matcher]:
+        if not (isinstance(cls, type) and issubclass(cls, Matcher)):
+            raise TypeError(f"@register_matcher({name!r}) must decorate a Matcher subclass")
+        existing = _REGISTRY.get(name)
+        if existing is not None and existing is not cls and not overwrite and \
+                existing.__qualname__ != cls.__qualname__:
+            raise ValueError(f"matcher name {name!r} is already registered by {existing.__module__}")
+        cls.name = name
+        _REGISTRY[name] = cls
+        return cls
+
+    return deco
+
+
+def _entry_points() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available_names() -> list[str]:
+    return sorted(set(BUILTINS) | set(_REGISTRY) | set(_entry_points()))
+
+
+def list_matchers(pattern: str = "*") -> list[str]:
+    """Registered names matching a shell-style pattern, e.g. ``list_matchers("clip*")``."""
+    return [n for n in available_names() if fnmatch.fnmatchcase(n, pattern)]
+
+
+def get_matcher_class(name: str) -> type[Matcher]:
+    if name not in _REGISTRY:
+        if name in BUILTINS:
+            importlib.import_module(BUILTINS[name])
+        else:
+            ep = _entry_points().get(name)
+            if ep is not None:
+                cls = ep.load()
+                if name not in _REGISTRY:  # an entry point may name a class that is not decorated
+                    register_matcher(name)(cls)
+    if name not in _REGISTRY:
+        close = difflib.get_close_matches(name, available_names(), n=3, cutoff=0.5)
+        hint = f"; did you mean {', '.join(close)}?" if close else f"; known: {', '.join(available_names())}"
+        raise UnknownMatcherError(f"unknown matcher {name!r}{hint}")
+    return _REGISTRY[name]
+
+
+def build_config(cls: type[Matcher], overrides: dict[str, Any]) -> MatcherConfig:
+    """The matcher's defaults merged with the user's overrides (strings from the CLI are coerced)."""
+    fields = {f.name: f for f in dataclasses.fields(cls.Config)}
+    hints = typing.get_type_hints(cls.Config)
+    kwargs = {}
+    for key, value in overrides.items():
+        if key not in fields:
+            close = difflib.get_close_matches(key, list(fields), n=3, cutoff=0.5)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; valid keys: {', '.join(fields)}"
+            raise ConfigError(f"matcher {cls.name!r} has no config key {key!r}{hint}")
+        kwargs[key] = _coerce(key, value, hints[key]) if isinstance(value, str) else value
+    return cls.Config(**kwargs)
+
+
+def _coerce(key: str, text: str, hint: Any) -> Any:
+    options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+    if type(None) in options and text.lower() in ("none", "null", ""):
+        return None
+    for typ in options:
+        if typ is bool:
+            if text.lower() in ("1", "true", "yes", "on"):
+                return True
+            if text.lower() in ("0", "false", "no", "off"):
+                return False
+        elif typ in (int, float):
+            try:
+                return typ(text)
+            except ValueError:
+                continue
+        elif typ is str:
+            return text
+        elif typing.get_origin(typ) in (tuple, list):
+            return typ(x.strip() for x in text.split(",")) if typing.get_origin(typ) is None else \
+                typing.get_origin(typ)(x.strip() for x in text.split(","))
+    raise ConfigError(f"config key {key!r}: cannot read {text!r} as {hint}")
+
+
+def parse_overrides(pairs: list[str] | None) -> dict[str, str]:
+    """``["k=v", ...]`` from ``--cfg`` into a dict."""
+    out = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--cfg {pair!r}: expected key=value")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def create_matcher(name: str, **overrides: Any) -> Matcher:
+    """Instantiate a matcher by name. Never touches the network: weights load lazily."""
+    cls = get_matcher_class(name)
+    return cls(build_config(cls, overrides))

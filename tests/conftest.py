@@ -1,0 +1,72 @@
+"""Shared fixtures: a tiny hand-made frame-set whose every pixel of ground truth is known."""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("HF_HUB_OFFLINE", "1")
+os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
+
+
+def make_view(color: tuple[int, int, int], size: int = 96, stripe: tuple[int, int, int] | None = None) -> np.ndarray:
+    """An RGBA reference: a coloured disc (optionally striped) on a transparent background."""
+    yy, xx = np.mgrid[:size, :size]
+    inside = (yy - size / 2) ** 2 + (xx - size / 2) ** 2 < (size * 0.4) ** 2
+    view = np.zeros((size, size, 4), np.uint8)
+    view[inside, :3] = color
+    if stripe is not None:
+        view[inside & ((xx // 8) % 2 == 0), :3] = stripe
+    view[inside, 3] = 255
+    return view
+
+
+def paint(image: np.ndarray, mask: np.ndarray, value: int, view: np.ndarray, x0: int, y0: int) -> None:
+    """Paste an RGBA view into a frame and its mask value into the instance mask."""
+    h, w = view.shape[:2]
+    alpha = view[..., 3] > 0
+    region = image[y0:y0 + h, x0:x0 + w]
+    region[alpha] = view[..., :3][alpha]
+    mask[y0:y0 + h, x0:x0 + w][alpha] = value
+
+
+@pytest.fixture(scope="session")
+def tiny_frameset(tmp_path_factory):
+    """2 episodes (train, val) x 4 frames, 640x360, with depth.
+
+    Per episode, frame 0 shows the target, frame 1 a same-category distractor, frame 2 an
+    other-category distractor, frame 3 nothing.
+    """
+    from pin_match.frameset_writer import FrameSetWriter
+
+    root = tmp_path_factory.mktemp("fs") / "tiny"
+    w = FrameSetWriter(root, "tiny")
+    objects = {
+        "mug_a": ("mug", "train", (200, 30, 30), (255, 255, 0)),
+        "mug_b": ("mug", "train", (30, 30, 200), None),
+        "ball_a": ("ball", "train", (30, 200, 30), (0, 0, 0)),
+        "mug_c": ("mug", "val", (220, 120, 20), (20, 20, 20)),
+        "mug_d": ("mug", "val", (120, 20, 220), None),
+        "ball_b": ("ball", "val", (20, 180, 180), None),
+    }
+    views = {}
+    for oid, (cat, split, color, stripe) in objects.items():
+        views[oid] = make_view(color, stripe=stripe)
+        w.add_object(oid, cat, split, [views[oid]] * 3, [f"a {cat} number {oid} view {k}" for k in range(3)])
+    for ep, split, (t, s, o) in (("ep_train", "train", ("mug_a", "mug_b", "ball_a")),
+                                 ("ep_val", "val", ("mug_c", "mug_d", "ball_b"))):
+        w.add_episode(ep, split, "scene0", t, [s, o])
+        roles = w.roles(ep)
+        for step, oid in enumerate([t, s, o, None]):
+            image = np.full((640, 360, 3), 90, np.uint8)
+            mask = np.zeros((640, 360), np.uint16)
+            depth = np.full((640, 360), 3.0, np.float32)
+            legend = {}
+            if oid is not None:
+                paint(image, mask, 1, views[oid], 100, 300)
+                depth[mask == 1] = 1.5
+                legend[1] = (oid, roles[oid])
+            w.add_frame(ep, step, image, mask, legend, depth)
+    return w.close()
