@@ -20,8 +20,21 @@ import pandas as pd
 
 from pin_match import atomic
 from pin_match.frameset import (
-    DESCRIPTIONS, EPISODES, FORMAT_NAME, FORMAT_VERSION, FRAMES, MANIFEST, N_DESCRIPTIONS, N_VIEWS,
-    OBJECT_IMAGES, OBJECTS, ROLES, SPLITS, VISIBILITY, FrameSet, FrameSetError,
+    DESCRIPTIONS,
+    EPISODES,
+    FORMAT_NAME,
+    FORMAT_VERSION,
+    FRAMES,
+    MANIFEST,
+    N_DESCRIPTIONS,
+    N_VIEWS,
+    OBJECT_IMAGES,
+    OBJECTS,
+    ROLES,
+    SPLITS,
+    VISIBILITY,
+    FrameSet,
+    FrameSetError,
 )
 
 VISIBILITY_COLUMNS = ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1", "depth"]
