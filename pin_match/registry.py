@@ -25,7 +25,6 @@ ENTRY_POINT_GROUP = "pin_match.matchers"
 BUILTINS: dict[str, str] = {
     "sift": "matchers.classic",
     "color": "matchers.classic",
-    "template": "matchers.classic",
     "dino": "matchers.patch",
     "dinov2": "matchers.patch",
     "clip": "matchers.patch",
