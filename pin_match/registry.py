@@ -113,21 +113,18 @@ def _coerce(key: str, text: str, hint: Any) -> Any:
     if type(None) in options and text.lower() in ("none", "null", ""):
         return None
     for typ in options:
-        if typ is bool:
-            if text.lower() in ("1", "true", "yes", "on"):
-                return True
-            if text.lower() in ("0", "false", "no", "off"):
-                return False
-        elif typ in (int, float):
-            try:
+        origin = typing.get_origin(typ)
+        try:
+            if origin in (tuple, list):
+                item = next((a for a in typing.get_args(typ) if a is not Ellipsis), str)
+                return origin(_coerce(key, x.strip(), item) for x in text.split(",") if x.strip())
+            if typ is bool:
+                return {"1": True, "true": True, "yes": True, "on": True,
+                        "0": False, "false": False, "no": False, "off": False}[text.lower()]
+            if typ in (int, float, str):
                 return typ(text)
-            except ValueError:
-                continue
-        elif typ is str:
-            return text
-        elif typing.get_origin(typ) in (tuple, list):
-            return typ(x.strip() for x in text.split(",")) if typing.get_origin(typ) is None else \
-                typing.get_origin(typ)(x.strip() for x in text.split(","))
+        except (ValueError, KeyError, ConfigError):
+            continue
     raise ConfigError(f"config key {key!r}: cannot read {text!r} as {hint}")
 
 

@@ -1,0 +1,5 @@
+import sys
+
+from pin_match.cli import main
+
+sys.exit(main())

@@ -1,0 +1,181 @@
+"""Frame-sets round-trip through the writer and loader, and every broken one is refused by name."""
+
+from __future__ import annotations
+
+import json
+import shutil
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pin_match.frameset import FrameSet, FrameSetError, read_image
+from pin_match.frameset_writer import FrameSetWriter
+
+
+def test_round_trip_tables_and_pixels(tiny_frameset):
+    fs = FrameSet.load(tiny_frameset.root)
+    assert list(fs.objects.columns[:3]) == ["object_id", "category", "split"]
+    assert set(fs.objects.object_id) == {"mug_a", "mug_b", "ball_a", "mug_c", "mug_d", "ball_b"}
+    assert fs.episodes.set_index("episode_id").loc["ep_val", "target_category"] == "mug"
+    assert list(fs.frames[fs.frames.episode_id == "ep_val"].step) == [0, 1, 2, 3]
+    assert set(fs.frames.split) == {"train", "val"}
+    vis = fs.visibility.set_index("frame_id")
+    assert vis.loc["ep_val_0000", "role"] == "target"
+    assert vis.loc["ep_val_0001", "role"] == "same_category"
+    assert vis.loc["ep_val_0002", "role"] == "other"
+    assert "ep_val_0003" not in vis.index
+    # the table agrees with the mask on disk, pixel for pixel
+    mask = fs.instance_mask("ep_val_0000")
+    row = vis.loc["ep_val_0000"]
+    ys, xs = np.nonzero(mask == row.mask_value)
+    assert row.pixels == len(xs) and (row.x0, row.y0, row.x1, row.y1) == (xs.min(), ys.min(), xs.max() + 1,
+                                                                           ys.max() + 1)
+    assert row.depth == pytest.approx(1.5)
+    assert fs.depth("ep_val_0000")[ys[0], xs[0]] == pytest.approx(1.5)
+    assert fs.image("ep_val_0000").shape == (640, 360, 3)
+    assert fs.object_pixels("ep_val_0000", "mug_c").sum() == row.pixels
+    target = fs.target("mug_c")
+    assert target.category == "mug" and len(target.views) == 3 and target.views[0].shape[2] == 4
+    assert target.descriptions[0] == "a mug number mug_c view 0"
+
+
+def test_split_view_and_fingerprint(tiny_frameset):
+    val = tiny_frameset.split("val")
+    assert set(val.frames.episode_id) == {"ep_val"} and len(val.visibility) == 3
+    assert val.fingerprint == tiny_frameset.fingerprint
+    with pytest.raises(FrameSetError, match="split 'test'"):
+        tiny_frameset.split("test")
+
+
+@pytest.fixture
+def broken(tiny_frameset, tmp_path):
+    """A fresh copy of the tiny frame-set to damage."""
+    root = tmp_path / "copy"
+    shutil.copytree(tiny_frameset.root, root)
+    return root
+
+
+def _edit_json(path, fn):
+    data = json.loads(path.read_text())
+    fn(data)
+    path.write_text(json.dumps(data))
+
+
+def test_fingerprint_changes_with_content(broken, tiny_frameset):
+    _edit_json(broken / "objects_descriptions.json", lambda d: d["mug_a"].__setitem__(0, "a different mug"))
+    assert FrameSet.load(broken).fingerprint != tiny_frameset.fingerprint
+
+
+def test_missing_manifest(broken):
+    (broken / "frameset.json").unlink()
+    with pytest.raises(FrameSetError, match=r"missing file .*frameset\.json"):
+        FrameSet.load(broken)
+
+
+def test_newer_format_version(broken):
+    _edit_json(broken / "frameset.json", lambda d: d.__setitem__("version", 99))
+    with pytest.raises(FrameSetError, match=r"frameset\.json has format version 99.*upgrade pin_match"):
+        FrameSet.load(broken)
+
+
+def test_missing_reference_view(broken):
+    (broken / "objects_images" / "mug_b" / "mug_b_1.png").unlink()
+    with pytest.raises(FrameSetError, match=r"object 'mug_b'.*holds 2 reference views, expected 3"):
+        FrameSet.load(broken)
+
+
+def test_missing_reference_folder(broken):
+    shutil.rmtree(broken / "objects_images" / "ball_a")
+    with pytest.raises(FrameSetError, match=r"object 'ball_a': missing reference folder"):
+        FrameSet.load(broken)
+
+
+def test_two_descriptions(broken):
+    _edit_json(broken / "objects_descriptions.json", lambda d: d["mug_c"].pop())
+    with pytest.raises(FrameSetError, match=r"object 'mug_c'.*holds 2 descriptions, expected 3"):
+        FrameSet.load(broken)
+
+
+def test_unknown_object_in_episode(broken):
+    _edit_json(broken / "episodes.json", lambda d: d["episodes"][0]["distractors"].append(
+        {"object_id": "ghost", "object_category": "mug"}))
+    with pytest.raises(FrameSetError, match=r"episode 'ep_train' refers to unknown object id 'ghost'"):
+        FrameSet.load(broken)
+
+
+def test_unknown_episode_in_frames(broken):
+    frames = pd.read_parquet(broken / "frames.parquet")
+    frames.loc[0, "episode_id"] = "ep_nowhere"
+    frames.to_parquet(broken / "frames.parquet")
+    with pytest.raises(FrameSetError, match=r"unknown episode id 'ep_nowhere'"):
+        FrameSet.load(broken)
+
+
+def test_unknown_frame_in_visibility(broken):
+    vis = pd.read_parquet(broken / "visibility.parquet")
+    vis.loc[0, "frame_id"] = "nope_0000"
+    vis.to_parquet(broken / "visibility.parquet")
+    with pytest.raises(FrameSetError, match=r"unknown frame id 'nope_0000'"):
+        FrameSet.load(broken)
+
+
+def test_missing_frame_file(broken):
+    (broken / "frames" / "ep_val" / "0002.jpg").unlink()
+    with pytest.raises(FrameSetError, match=r"frame 'ep_val_0002': missing image file .*0002\.jpg"):
+        FrameSet.load(broken)
+
+
+def test_unknown_ids_on_access(tiny_frameset):
+    with pytest.raises(FrameSetError, match="unknown frame id 'zzz'"):
+        tiny_frameset.image("zzz")
+    with pytest.raises(FrameSetError, match="unknown object id 'zzz'"):
+        tiny_frameset.target("zzz")
+    with pytest.raises(FrameSetError, match="unknown episode id 'zzz'"):
+        tiny_frameset.episode("zzz")
+
+
+def test_corrupt_and_truncated_images(broken):
+    fs = FrameSet.load(broken)
+    path = broken / "frames" / "ep_val" / "0001.jpg"
+    path.write_bytes(path.read_bytes()[:50])
+    with pytest.raises(FrameSetError, match=r"corrupt or unreadable image .*0001\.jpg"):
+        fs.image("ep_val_0001")
+    path.write_bytes(b"")
+    with pytest.raises(FrameSetError, match=r"0001\.jpg"):
+        fs.image("ep_val_0001")
+
+
+def test_reference_without_alpha(broken):
+    import cv2
+
+    path = broken / "objects_images" / "mug_a" / "mug_a_0.png"
+    rgb = read_image(path, rgba=True)[..., :3]
+    cv2.imwrite(str(path), rgb)
+    with pytest.raises(FrameSetError, match=r"mug_a_0\.png has no alpha channel"):
+        FrameSet.load(broken).target("mug_a")
+
+
+def test_writer_refuses_existing_and_leaves_nothing_on_failure(tmp_path):
+    root = tmp_path / "fs"
+    root.mkdir()
+    with pytest.raises(FrameSetError, match="already exists"):
+        FrameSetWriter(root)
+    target = tmp_path / "other"
+    with pytest.raises(FrameSetError, match="needs 3 views"):
+        with FrameSetWriter(target) as w:
+            w.add_object("x", "mug", "val", [np.zeros((4, 4, 4), np.uint8)] * 2, ["a", "b", "c"])
+    assert not target.exists() and not list(tmp_path.glob(".other*"))
+
+
+def test_writer_rejects_unlabelled_mask_value(tmp_path):
+    with FrameSetWriter(tmp_path / "fs") as w:
+        view = np.zeros((8, 8, 4), np.uint8)
+        view[2:6, 2:6] = 255
+        w.add_object("o", "mug", "val", [view] * 3, ["a", "b", "c"])
+        w.add_episode("e", "val", "s", "o", [])
+        mask = np.zeros((16, 16), np.uint16)
+        mask[3, 3] = 7
+        with pytest.raises(FrameSetError, match="mask value 7 has no entry in the legend"):
+            w.add_frame("e", 0, np.zeros((16, 16, 3), np.uint8), mask, {1: ("o", "target")})
+        w.abort()

@@ -1,0 +1,90 @@
+"""A PIN recording written by the test is imported; its visibility matches the semantic frames exactly."""
+
+from __future__ import annotations
+
+import json
+
+import cv2
+import numpy as np
+import pytest
+
+from conftest import make_view
+from pin_match.frameset import FrameSetError
+from pin_match.importer import import_recording
+
+
+@pytest.fixture
+def recording(tmp_path):
+    rng = np.random.default_rng(0)
+    objects = tmp_path / "objects"
+    descriptions = {}
+    for oid, color in (("obj_t", (200, 20, 20)), ("obj_s", (20, 200, 20)), ("obj_o", (20, 20, 200))):
+        folder = objects / "objects_images" / oid
+        folder.mkdir(parents=True)
+        for k in range(3):
+            cv2.imwrite(str(folder / f"{oid}_{k}.png"), cv2.cvtColor(make_view(color), cv2.COLOR_RGBA2BGRA))
+        descriptions[oid] = [f"{oid} description {k}" for k in range(3)]
+    (objects / "objects_descriptions.json").write_text(json.dumps(descriptions))
+    rec = tmp_path / "rec"
+    rec.mkdir()
+    episodes = [dict(episode_id="7", scene_id="sceneA",
+                     goals=[dict(object_id="obj_t", object_category="mug")],
+                     distractors=[dict(object_id="obj_s", object_category="mug"),
+                                  dict(object_id="obj_o", object_category="ball")])]
+    (rec / "episodes.json").write_text(json.dumps({"episodes": episodes}))
+    semantics = []
+    for step in range(3):
+        for sub in ("rgb", "semantic", "depth"):
+            (rec / "7" / sub).mkdir(parents=True, exist_ok=True)
+        rgb = rng.integers(0, 255, (64, 48, 3), dtype=np.uint8)
+        sem = rng.choice([0, 5, 100000, 100001, 100002], size=(64, 48)).astype(np.int64)
+        if step == 2:
+            sem[sem == 100000] = 0  # a frame without the target
+        depth = rng.uniform(0.5, 5.0, (64, 48)).astype(np.float32)
+        cv2.imwrite(str(rec / "7" / "rgb" / f"{step}.png"), rgb)
+        np.save(rec / "7" / "semantic" / f"{step}.npy", sem)
+        np.save(rec / "7" / "depth" / f"{step}.npy", depth)
+        semantics.append((sem, depth))
+    return rec, objects, semantics
+
+
+def test_import_matches_semantic_frames_pixel_for_pixel(recording, tmp_path):
+    rec, objects, semantics = recording
+    fs = import_recording(rec, objects, tmp_path / "fs", split="val")
+    assert list(fs.frames.frame_id) == ["7_0000", "7_0001", "7_0002"]
+    assert fs.episodes.iloc[0].target_object_id == "obj_t" and fs.episodes.iloc[0].target_category == "mug"
+    for step, (sem, depth) in enumerate(semantics):
+        fid = f"7_{step:04d}"
+        rows = fs.visibility[fs.visibility.frame_id == fid].set_index("role")
+        mask = fs.instance_mask(fid)
+        for label, role in ((100000, "target"), (100001, "same_category"), (100002, "other")):
+            pixels = sem == label
+            if not pixels.any():
+                assert role not in rows.index
+                continue
+            row = rows.loc[role]
+            assert row.pixels == pixels.sum()
+            assert np.array_equal(mask == row.mask_value, pixels)
+            ys, xs = np.nonzero(pixels)
+            assert (row.x0, row.y0, row.x1, row.y1) == (xs.min(), ys.min(), xs.max() + 1, ys.max() + 1)
+            stored = np.round(depth[pixels] * 1000) / 1000
+            assert row.depth == pytest.approx(stored.mean(), abs=1e-6)
+        assert (rows.loc["target"].object_id if "target" in rows.index else "obj_t") == "obj_t"
+    assert fs.target("obj_s").descriptions[1] == "obj_s description 1"
+
+
+def test_import_names_the_missing_semantic_frame(recording, tmp_path):
+    rec, objects, _ = recording
+    (rec / "7" / "semantic" / "1.npy").unlink()
+    with pytest.raises(FrameSetError, match=r"has no semantic frame .*semantic/1\.npy"):
+        import_recording(rec, objects, tmp_path / "fs")
+    assert not (tmp_path / "fs").exists()
+
+
+def test_import_names_the_missing_object(recording, tmp_path):
+    rec, objects, _ = recording
+    import shutil
+
+    shutil.rmtree(objects / "objects_images" / "obj_o")
+    with pytest.raises(FrameSetError, match=r"object 'obj_o': missing reference folder"):
+        import_recording(rec, objects, tmp_path / "fs")
