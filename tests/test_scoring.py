@@ -1,0 +1,115 @@
+"""Scoring is cached by config and frame-set, resumes after SIGKILL to the same bytes, shards, and shares."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import slow_plugin  # noqa: F401  (registers test-slow)
+
+from pin_match.scoretable import ScoreTable
+from pin_match.scoring import Shard, merge, score
+
+TESTS = Path(__file__).parent
+
+
+def _cli(args: list[str], env_extra: dict | None = None) -> subprocess.Popen:
+    code = "import sys, slow_plugin; from pin_match.cli import main; sys.exit(main(sys.argv[1:]))"
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]),
+               **(env_extra or {}))
+    return subprocess.Popen([sys.executable, "-c", code, *args], env=env, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE)
+
+
+def test_table_contents(tiny_frameset, tmp_path):
+    t = score(tiny_frameset, "color", out=tmp_path, progress=False)
+    assert list(t.frames.frame_id) == sorted(tiny_frameset.frames.frame_id)
+    assert t.meta["frameset_fingerprint"] == tiny_frameset.fingerprint
+    assert t.meta["matcher_id"] == f"color@{t.meta['config_hash']}"
+    row = t.frames.set_index("frame_id").loc["ep_val_0000"]
+    assert row.score == pytest.approx(max(row.crop_scores)) and len(row.crop_scores) == 2
+    assert len(row.points_x) == len(row.point_scores) > 0
+    pts = t.points("ep_val_0000", 0.5)
+    assert len(pts) and tiny_frameset.object_pixels("ep_val_0000", "mug_c")[
+        pts[:, 1].astype(int), pts[:, 0].astype(int)].mean() > 0.5
+
+
+def test_rerun_hits_the_cache_and_a_new_config_does_not(tiny_frameset, tmp_path, monkeypatch):
+    log = tmp_path / "log.txt"
+    monkeypatch.setenv("PIN_MATCH_TEST_LOG", str(log))
+    first = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, progress=False)
+    n = len(log.read_text().splitlines())
+    again = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, progress=False)
+    assert len(log.read_text().splitlines()) == n == 2  # no target prepared twice, nothing rescored
+    assert again.frames.equals(first.frames)
+    other = score(tiny_frameset, "test-slow", overrides={"delay": 0.001}, out=tmp_path, progress=False)
+    assert other.meta["config_hash"] != first.meta["config_hash"]
+    assert len(log.read_text().splitlines()) == 4
+
+
+def test_split_scores_only_that_split(tiny_frameset, tmp_path):
+    t = score(tiny_frameset, "color", split="val", out=tmp_path, progress=False)
+    assert set(t.frames.split) == {"val"} and len(t.frames) == 4
+
+
+def test_shards_merge_to_the_unsharded_table(tiny_frameset, tmp_path):
+    assert Shard.parse("1/3").select(list("abcdefg")) == ["b", "e"]
+    with pytest.raises(ValueError, match="0 <= i < n"):
+        Shard.parse("3/3")
+    full = score(tiny_frameset, "color", out=tmp_path / "full", progress=False)
+    parts = [score(tiny_frameset, "color", out=tmp_path / f"s{i}", shard=f"{i}/2", progress=False) for i in range(2)]
+    assert [len(p.frames) for p in parts] == [4, 4]
+    paths = sorted((tmp_path).glob("s*/*/*/scores_all_shard*.parquet"))
+    merged = merge(paths, tmp_path / "merged.parquet")
+    assert merged.frames.drop(columns=[]).equals(full.frames)
+    with pytest.raises(Exception, match="appears in more than one part"):
+        merge([paths[0], paths[0]], tmp_path / "bad.parquet")
+
+
+def _table_bytes(out: Path) -> bytes:
+    (path,) = out.glob("*/*/scores_all.parquet")
+    return path.read_bytes()
+
+
+def test_sigkill_mid_run_resumes_to_identical_bytes(tiny_frameset, tmp_path):
+    args = ["score", str(tiny_frameset.root), "--matcher", "test-slow", "--cfg", "delay=0.15", "--quiet",
+            "--batch-size", "2"]
+    ref = _cli([*args, "--out", str(tmp_path / "ref")])
+    assert ref.wait(timeout=120) == 0, ref.stderr.read().decode()
+
+    out = tmp_path / "killed"
+    proc = _cli([*args, "--out", str(out)])
+    deadline = time.time() + 60
+    while not list(out.glob("*/*/chunks/*.parquet")) and time.time() < deadline:
+        time.sleep(0.02)
+    proc.send_signal(signal.SIGKILL)
+    proc.wait(timeout=30)
+    assert proc.returncode == -signal.SIGKILL
+    assert len(list(out.glob("*/*/chunks/*.parquet"))) == 1  # killed half way: one of two episodes done
+    assert not list(out.glob("*/*/scores_all.parquet"))
+
+    resumed = _cli([*args, "--out", str(out)])
+    assert resumed.wait(timeout=120) == 0, resumed.stderr.read().decode()
+    assert _table_bytes(out) == _table_bytes(tmp_path / "ref")
+    assert not list(out.rglob("*.tmp"))
+
+
+def test_two_processes_share_one_cache(tiny_frameset, tmp_path):
+    args = ["score", str(tiny_frameset.root), "--matcher", "test-slow", "--cfg", "delay=0.1", "--quiet",
+            "--out", str(tmp_path / "shared")]
+    log = tmp_path / "log.txt"
+    procs = [_cli(args, {"PIN_MATCH_TEST_LOG": str(log)}) for _ in range(2)]
+    for p in procs:
+        assert p.wait(timeout=120) == 0, p.stderr.read().decode()
+    ref = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "ref", progress=False)
+    got = ScoreTable.read(next((tmp_path / "shared").glob("*/*/scores_all.parquet")))
+    assert np.array_equal(got.frames.score.to_numpy(), ref.frames.score.to_numpy())
+    prepared = [line.split()[-1] for line in log.read_text().splitlines()]
+    assert sorted(prepared) == ["mug_a", "mug_c"]  # each episode scored by exactly one process
+    assert not list((tmp_path / "shared").rglob("*.lock")) and not list((tmp_path / "shared").rglob("*.tmp"))
