@@ -1,6 +1,6 @@
-"""``pin-match``: a thin command line over the same functions notebooks call.
+"""pin-match: score, tune and report PIN matchers on frame-sets, offline.
 
-Every failure a user can cause (bad frame-set, unknown matcher or key, unwritable output)
+A thin command line over the same functions notebooks call. Every failure a user can cause (bad frame-set, unknown matcher or key, unwritable output)
 ends in one line on stderr naming the culprit and a non-zero exit code, not a traceback.
 """
 
