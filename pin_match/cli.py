@@ -1,7 +1,8 @@
 """pin-match: score, tune and report PIN matchers on frame-sets, offline.
 
-A thin command line over the same functions notebooks call. Every failure a user can cause (bad frame-set, unknown matcher or key, unwritable output)
-ends in one line on stderr naming the culprit and a non-zero exit code, not a traceback.
+A thin command line over the same functions notebooks call. Every failure a user can
+cause (bad frame-set, unknown matcher or key, unwritable output) ends in one line on
+stderr naming the culprit and a non-zero exit code, not a traceback.
 """
 
 from __future__ import annotations

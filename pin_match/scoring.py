@@ -24,7 +24,7 @@ import pandas as pd
 import pin_match
 from pin_match import atomic
 from pin_match.frameset import FrameSet
-from pin_match.matcher import Matcher, MatchResult
+from pin_match.matcher import Matcher, MatcherError, MatchResult
 from pin_match.registry import create_matcher
 from pin_match.scoretable import COLUMNS, ScoreTable, ScoreTableError
 
@@ -89,7 +89,7 @@ def score(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides:
         if cached.meta == meta:
             return cached
     workers = workers or min(2, os.cpu_count() or 1)
-    chunks = root / "chunks"
+    chunks = atomic.ensure_dir(root / "chunks")
     with _progress(part, episode_ids, progress, matcher) as bar, \
             ThreadPoolExecutor(max_workers=max(2, workers)) as pool:
         pending = list(episode_ids)
@@ -143,12 +143,15 @@ def _score_episode(fs: FrameSet, matcher: Matcher, episode_id: str, batch_size: 
         images = decoded[k].result()
         if k + 2 < len(batches):
             decoded.append(pool.submit(lambda b=batches[k + 2]: [fs.image(f) for f in b]))
-        if parallel:
-            parts = np.array_split(np.arange(len(images)), min(workers, len(images)))
-            futures = [pool.submit(matcher.match_batch, [images[i] for i in p]) for p in parts if len(p)]
-            out = [r for f in futures for r in f.result()]
-        else:
-            out = matcher.match_batch(images)
+        try:
+            if parallel:
+                parts = np.array_split(np.arange(len(images)), min(workers, len(images)))
+                futures = [pool.submit(matcher.match_batch, [images[i] for i in p]) for p in parts if len(p)]
+                out = [r for f in futures for r in f.result()]
+            else:
+                out = matcher.match_batch(images)
+        except MatcherError as exc:
+            raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") from exc
         results.extend(out)
         bar.update(len(images))
     return pd.DataFrame(dict(
@@ -168,7 +171,6 @@ def _empty_rows() -> pd.DataFrame:
 
 def _try_lock(path: Path) -> Path | None:
     """An exclusive per-episode lock file; a lock older than LOCK_STALE_S or of a dead pid is taken over."""
-    path.parent.mkdir(parents=True, exist_ok=True)
     for _ in range(2):
         try:
             fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
