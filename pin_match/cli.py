@@ -41,13 +41,15 @@ def _cmd_import(a: argparse.Namespace) -> None:
 
 
 def _cmd_score(a: argparse.Namespace) -> None:
-    from pin_match.scoring import score
+    import pandas as pd
 
-    table = score(a.frameset, a.matcher, overrides=parse_overrides(a.cfg), weights=a.weights, split=a.split,
-                  out=a.out, batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
-    s = table.frames.score
-    print(f"{table.matcher_id}: {len(s)} frames scored, score min {s.min():.4g} / mean {s.mean():.4g} / "
-          f"max {s.max():.4g}" if len(s) else f"{table.matcher_id}: no frames")
+    from pin_match.scoring import read_meta, score_to_file
+
+    path = score_to_file(a.frameset, a.matcher, overrides=parse_overrides(a.cfg), weights=a.weights, split=a.split,
+                         out=a.out, batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
+    s = pd.read_parquet(path, columns=["score"]).score
+    summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
+    print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
 
 
 def _cmd_merge(a: argparse.Namespace) -> None:

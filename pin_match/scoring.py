@@ -26,7 +26,7 @@ from pin_match import atomic
 from pin_match.frameset import FrameSet
 from pin_match.matcher import Matcher, MatcherError, MatchResult
 from pin_match.registry import create_matcher
-from pin_match.scoretable import COLUMNS, ScoreTable, ScoreTableError
+from pin_match.scoretable import COLUMNS, META_KEY, ScoreTable, ScoreTableError
 
 DEFAULT_OUT = Path("pin_match_runs") / "scores"
 LOCK_STALE_S = 600.0
@@ -64,11 +64,19 @@ def table_name(split: str | None, shard: Shard | None) -> str:
     return f"{name}_shard{shard}.parquet" if shard else f"{name}.parquet"
 
 
-def score(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
-          weights: str | None = None, split: str | None = None, out: str | Path = DEFAULT_OUT,
-          batch_size: int = 8, shard: Shard | str | None = None, workers: int | None = None,
-          progress: bool = True) -> ScoreTable:
-    """Score every frame of ``split`` (cached); returns the score table and writes it under ``out``."""
+def score(frameset: FrameSet | str | Path, matcher: Matcher | str, **kwargs) -> ScoreTable:
+    """Score every frame of ``split`` (cached); returns the score table and writes it under ``out``.
+
+    Keyword arguments are those of ``score_to_file``.
+    """
+    return ScoreTable.read(score_to_file(frameset, matcher, **kwargs))
+
+
+def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
+                  weights: str | None = None, split: str | None = None, out: str | Path = DEFAULT_OUT,
+                  batch_size: int = 8, shard: Shard | str | None = None, workers: int | None = None,
+                  progress: bool = True) -> Path:
+    """Score (or find in the cache) and return the table's path; memory stays flat in the number of frames."""
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(matcher, str):
         overrides = dict(overrides or {})
@@ -84,10 +92,8 @@ def score(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides:
     root = cache_dir(out, matcher, fs)
     final = root / table_name(split, shard)
     meta = table_meta(matcher, fs, split, shard)
-    if final.exists():
-        cached = ScoreTable.read(final)
-        if cached.meta == meta:
-            return cached
+    if final.exists() and read_meta(final) == meta:
+        return final
     workers = workers or min(2, os.cpu_count() or 1)
     chunks = atomic.ensure_dir(root / "chunks")
     with _progress(part, episode_ids, progress, matcher) as bar, \
@@ -111,11 +117,33 @@ def score(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides:
             if deferred:
                 time.sleep(0.2)
             pending = deferred
-    frames = pd.concat([pd.read_parquet(chunks / f"{e}.parquet") for e in episode_ids], ignore_index=True) \
-        if episode_ids else _empty_rows()
-    table = ScoreTable(canonical_order(frames)[COLUMNS], meta)
-    table.write(final)
-    return ScoreTable.read(final)
+    _assemble(final, [chunks / f"{e}.parquet" for e in sorted(episode_ids)], meta)
+    return final
+
+
+def _assemble(final: Path, chunk_files: list[Path], meta: dict) -> None:
+    """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pa.Schema.from_pandas(_empty_rows(), preserve_index=False)
+    if chunk_files:
+        schema = pq.read_schema(chunk_files[0]).remove_metadata()
+    schema = schema.with_metadata({META_KEY: json.dumps(meta, sort_keys=True, default=str).encode()})
+    with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
+        for path in chunk_files:
+            writer.write_table(pq.read_table(path).select(COLUMNS).replace_schema_metadata(schema.metadata))
+
+
+def read_meta(path: Path) -> dict | None:
+    """A score table's metadata without reading its rows."""
+    import pyarrow.parquet as pq
+
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+    except Exception:  # a damaged file is simply not a cache hit
+        return None
+    return json.loads(raw) if raw else None
 
 
 def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
@@ -155,7 +183,7 @@ def _score_episode(fs: FrameSet, matcher: Matcher, episode_id: str, batch_size: 
         results.extend(out)
         bar.update(len(images))
     return pd.DataFrame(dict(
-        frame_id=ids, episode_id=episode_id, step=frames.step.to_numpy(np.int64), split=ep.split,
+        frame_id=ids, episode_id=episode_id, step=frames.step.to_numpy(np.int64), split=str(ep.split),
         score=np.array([r.score for r in results], np.float64),
         crop_scores=[(r.crop_scores if r.crop_scores is not None else np.array([r.score])).astype(np.float32)
                      for r in results],
@@ -166,7 +194,11 @@ def _score_episode(fs: FrameSet, matcher: Matcher, episode_id: str, batch_size: 
 
 
 def _empty_rows() -> pd.DataFrame:
-    return pd.DataFrame({c: pd.Series(dtype=object) for c in COLUMNS})
+    """The table's columns with their types, for a part with no episodes."""
+    lists = {c: pd.Series([], dtype=object) for c in ("crop_scores", "points_x", "points_y", "point_scores")}
+    return pd.DataFrame({"frame_id": pd.Series([], dtype=object), "episode_id": pd.Series([], dtype=object),
+                         "step": pd.Series([], dtype=np.int64), "split": pd.Series([], dtype=object),
+                         "score": pd.Series([], dtype=np.float64), **lists})[COLUMNS]
 
 
 def _try_lock(path: Path) -> Path | None:

@@ -1,0 +1,47 @@
+"""Frame-sets for benchmarks: the synthetic default, or a fast procedural one of any size."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from pin_match.frameset import FrameSet
+from pin_match.frameset_writer import FrameSetWriter
+
+CACHE = Path("pin_match_runs") / "benchmarks"
+
+
+def synthetic(episodes: int, name: str) -> FrameSet:
+    """A cached synthetic frame-set with ``episodes`` episodes (generated on first use)."""
+    from pin_match.synth import generate
+
+    root = CACHE / name
+    if (root / "frameset.json").exists():
+        return FrameSet.load(root)
+    return generate(root, seed=0, episodes=episodes, overwrite=True)
+
+
+def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:
+    """Many cheap frames (coloured rectangles, one of them the target) for memory and throughput scaling."""
+    root = CACHE / f"procedural_{n_frames}"
+    if (root / "frameset.json").exists():
+        return FrameSet.load(root)
+    rng = np.random.default_rng(seed)
+    w = FrameSetWriter(root, root.name, overwrite=True)
+    view = np.zeros((96, 96, 4), np.uint8)
+    view[16:80, 16:80] = (220, 60, 40, 255)
+    w.add_object("box", "toy", "val", [view] * 3, ["a red box", "a red square box", "a small red box"])
+    n_episodes = max(1, n_frames // frames_per_episode)
+    for e in range(n_episodes):
+        episode_id = f"ep{e:05d}"
+        w.add_episode(episode_id, "val", "procedural", "box", [])
+        for step in range(frames_per_episode):
+            image = np.full((640, 360, 3), rng.integers(40, 200, 3), np.uint8)
+            mask = np.zeros((640, 360), np.uint16)
+            if step % 5 == 0:
+                y, x = rng.integers(0, 560), rng.integers(0, 280)
+                image[y:y + 64, x:x + 64] = (220, 60, 40)
+                mask[y:y + 64, x:x + 64] = 1
+            w.add_frame(episode_id, step, image, mask, {1: ("box", "target")})
+    return w.close()

@@ -1,0 +1,150 @@
+"""Tuning and reports end to end on the tiny frame-set with a hand-made score table."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pin_match.labels import LabelError, frame_labels, localisation_hits, scored_frames
+from pin_match.report import ReportError, latex_table, markdown_table, report, side_by_side
+from pin_match.scoretable import ScoreTable
+from pin_match.tuning import OBJECTIVES, TuningError, load_threshold, tune, write_thresholds
+
+ON_TARGET = (148.0, 348.0)  # centre of the disc painted at (100, 300) with radius ~38 px
+OFF_TARGET = (10.0, 10.0)
+
+# per episode, steps 0..3 show: target, same-category distractor, other distractor, nothing
+SCORES = {"ep_train": [0.8, 0.85, 0.2, 0.1], "ep_val": [0.9, 0.7, 0.3, 0.1]}
+
+
+def make_table(fs, tmp_path) -> ScoreTable:
+    rows = []
+    for episode, scores in SCORES.items():
+        for step, score in enumerate(scores):
+            points, point_scores = [ON_TARGET], [score]
+            if episode == "ep_val" and step == 0:  # one point on the target, one off it at a lower score
+                points, point_scores = [ON_TARGET, OFF_TARGET], [0.9, 0.6]
+            rows.append(dict(frame_id=f"{episode}_{step:04d}", episode_id=episode, step=step,
+                             split=episode.split("_")[1], score=score, crop_scores=[score, score],
+                             points_x=[p[0] for p in points], points_y=[p[1] for p in points],
+                             point_scores=point_scores))
+    meta = dict(matcher="stub", matcher_id="stub@abc", config_hash="abc", frameset_fingerprint=fs.fingerprint,
+                default_sigma=0.5, modality="visual")
+    ScoreTable(pd.DataFrame(rows), meta).write(tmp_path / "scores.parquet")
+    return ScoreTable.read(tmp_path / "scores.parquet")
+
+
+def test_labels_of_the_tiny_frameset(tiny_frameset):
+    labels = frame_labels(tiny_frameset).set_index("frame_id")
+    assert list(labels.loc[[f"ep_val_{s:04d}" for s in range(4)], "target_visible"]) == [True, False, False, False]
+    assert list(labels.loc[[f"ep_val_{s:04d}" for s in range(4)], "same_visible"]) == [False, True, False, False]
+    assert list(labels.loc[[f"ep_val_{s:04d}" for s in range(4)], "other_visible"]) == [False, False, True, False]
+    row = labels.loc["ep_val_0000"]
+    assert row.target_category == "mug" and row.target_depth == pytest.approx(1.5)
+    # the disc covers ~4,600 of 230,400 pixels, under PIN's 5 %: not "seen"
+    assert 4000 < row.target_pixels < 5000 and row.target_seen == 0.0
+
+
+def test_scores_from_another_frameset_are_rejected(tiny_frameset, tmp_path):
+    table = make_table(tiny_frameset, tmp_path)
+    table.frames.loc[0, "frame_id"] = "elsewhere_0000"
+    with pytest.raises(LabelError, match="elsewhere_0000"):
+        scored_frames(frame_labels(tiny_frameset), table)
+
+
+def test_localisation_hits(tiny_frameset, tmp_path):
+    hits = localisation_hits(tiny_frameset, make_table(tiny_frameset, tmp_path), 0.5)
+    # matched target frames: ep_train_0000 (one point, on) and ep_val_0000 (two points, one on)
+    assert hits.set_index("frame_id").to_dict("index") == {
+        "ep_train_0000": dict(n_points=1, n_on_target=1, hit=True),
+        "ep_val_0000": dict(n_points=2, n_on_target=1, hit=True)}
+
+
+@pytest.mark.parametrize("objective", sorted(OBJECTIVES))
+def test_tune_on_train(tiny_frameset, tmp_path, objective):
+    table = make_table(tiny_frameset, tmp_path)
+    result = tune(table, frame_labels(tiny_frameset), objective=objective)
+    # train scores: target .8, same .85, other .2, nothing .1. At .85 only the distractor matches (first match
+    # wrong, TM 0 %); at .8 the target is matched and first: every objective peaks there (first-match: 100 %
+    # also at .2 and .1, so the tie goes to the highest sigma)
+    assert result["sigma"] == 0.8
+    assert result["split"] == "train" and result["frameset_fingerprint"] == tiny_frameset.fingerprint
+    assert result["metrics_at_sigma"]["tm_pct"] == 50.0 and result["n_candidates"] == 4
+    path = write_thresholds(result, tmp_path / "thresholds" / "stub.json")
+    assert load_threshold(path, "stub") == 0.8 and load_threshold(path, "stub@abc") == 0.8
+    with pytest.raises(TuningError, match="not 'dino'"):
+        load_threshold(path, "dino")
+
+
+def test_tune_errors(tiny_frameset, tmp_path):
+    table, labels = make_table(tiny_frameset, tmp_path), frame_labels(tiny_frameset)
+    with pytest.raises(TuningError, match="unknown objective"):
+        tune(table, labels, objective="accuracy")
+    with pytest.raises(TuningError, match="no frames of split"):
+        tune(table.split("val"), labels)
+    with pytest.raises(TuningError, match="keeps %Match >= 101"):
+        tune(table, labels, objective="tm-at-match", match_floor=101)
+
+
+def test_load_paper_thresholds(tmp_path):
+    path = tmp_path / "paper.json"
+    path.write_text(json.dumps({"source": "PIN", "thresholds": {"dinov2": {"sigma": 0.5}, "ieve": {"sigma": None}}}))
+    assert load_threshold(path, "dinov2") == 0.5
+    assert load_threshold(path, "dinov2@123") == 0.5
+    with pytest.raises(TuningError, match="not a number"):
+        load_threshold(path, "ieve")
+    with pytest.raises(TuningError, match="no threshold for 'owl'"):
+        load_threshold(path, "owl")
+
+
+def test_report_end_to_end(tiny_frameset, tmp_path):
+    table = make_table(tiny_frameset, tmp_path)
+    out = tmp_path / "report"
+    result = report(table, tiny_frameset, out, n_boot=50)  # sigma: the table's default 0.5; split val
+    for name in ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma_curves.png",
+                 "score_distributions.png", "per_category.png"):
+        assert (out / name).stat().st_size > 0, name
+    saved = json.loads((out / "metrics.json").read_text())
+    m = saved["metrics"]
+    assert saved["sigma"] == 0.5 and saved["sigma_source"] == "matcher default" and saved["split"] == "val"
+    # val at .5: target (.9) and same-category (.7) frames matched; the first one (step 0) is the target
+    assert (m["tm_pct"], m["cm_pct"], m["nm_pct"], m["gm_pct"], m["om_pct"]) == (50.0, 50.0, 0.0, 0.0, 0.0)
+    assert m["match_pct"] == 100.0 and m["target_recall"] == 100.0 and m["first_match_precision"] == 100.0
+    assert m["target_recall_seen"] is None  # no frame is "seen": undefined, not 0
+    assert m["auroc_target"] == 1.0
+    assert m["localisation_accuracy"] == 100.0 and m["localisation_point_precision"] == 50.0
+    assert saved["ci95"]["tm_pct"] == [50.0, 50.0]  # one episode: every resample equals it
+    md = (out / "metrics.md").read_text()
+    assert "| stub@abc | 0.5 | 100.00 | 50.00 | 50.00 | 0.00 |" in md and "n/a" not in md.split("##")[0]
+    assert r"\%Match" in (out / "metrics.tex").read_text()
+    per_cat = pd.read_csv(out / "per_category.csv", index_col="category")
+    assert list(per_cat.index) == ["mug"] and per_cat.loc["mug", "tm_pct"] == 50.0
+    assert result["files"][0].endswith("metrics.json")
+
+
+def test_report_threshold_sources(tiny_frameset, tmp_path):
+    table = make_table(tiny_frameset, tmp_path)
+    result = report(table, tiny_frameset, tmp_path / "r", sigma=0.95, n_boot=10)
+    assert result["metrics"]["tm_pct"] is None  # nothing matched
+    assert "| n/a |" in (tmp_path / "r" / "metrics.md").read_text()
+    with pytest.raises(ReportError, match="either"):
+        report(table, tiny_frameset, tmp_path / "r", sigma=0.5, thresholds=tmp_path / "x.json")
+    table.meta["frameset_fingerprint"] = "0000"
+    with pytest.raises(ReportError, match="computed on frame-set 0000"):
+        report(table, tiny_frameset, tmp_path / "r", sigma=0.5)
+
+
+def test_side_by_side_tables():
+    results = [dict(matcher="a", matcher_id="a@1", sigma=0.5,
+                    metrics=dict(match_pct=55.74, tm_pct=55.33, cm_pct=42.0, nm_pct=2.67, auroc_target=0.91)),
+               dict(matcher="b", matcher_id="b@2", sigma=8.0, metrics=dict(match_pct=0.0, tm_pct=None))]
+    table = side_by_side(results)
+    assert list(table.index) == ["a@1", "b@2"] and np.isnan(table.loc["b@2", "TM"])
+    md = markdown_table(table)
+    assert "| a@1 | 0.5 | 55.74 | 55.33 | 42.00 | 2.67 |" in md
+    assert "| b@2 | 8 | 0.00 | n/a |" in md
+    tex = latex_table(table, caption="val")
+    assert r"a@1 & 0.5 & 55.74 & 55.33 & 42.00 & 2.67" in tex and r"\caption{val}" in tex
