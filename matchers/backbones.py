@@ -1,0 +1,173 @@
+"""Backbone adapters: turn square-squashed RGB images into patch tokens and one global embedding.
+
+The patch matchers only need "tokens per patch" and "a CLS-like vector"; keeping timm and
+open_clip behind that small protocol lets the similarity math be tested exactly with a stub
+whose features are set by hand, and keeps every library quirk (prefix tokens, CLIP's joint
+space, preprocessing constants) in one place. Models are built only when an adapter is
+constructed, which the matchers do lazily on first use, never at import.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from pin_match.weights import WeightsError, WeightsSpec
+
+# checkpoint names looked for, in order, when ``weights=`` names a folder (what the libraries save)
+TIMM_FILES = ("model.safetensors", "pytorch_model.bin", "model.pth")
+OPEN_CLIP_FILES = ("open_clip_model.safetensors", "open_clip_pytorch_model.bin", "model.safetensors",
+                   "pytorch_model.bin", "model.pth")
+
+
+@dataclass
+class PatchFeatures:
+    """One forward pass: a global vector per image and the tokens of its grid x grid patches (row-major)."""
+
+    cls: torch.Tensor      # (B, D)
+    patches: torch.Tensor  # (B, grid * grid, D)
+
+
+class PatchBackbone(Protocol):
+    """What a patch-similarity matcher needs from a vision model."""
+
+    input_size: int  # side of the square input every image is squashed to
+    grid: int        # patches per side
+
+    def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
+        """Images are H x W x 3 uint8 RGB of any size; each is squashed to the square input."""
+        ...
+
+
+class TextBackbone(PatchBackbone, Protocol):
+    """A joint image-text model: text features live in the same space as the patch tokens."""
+
+    def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
+        """(len(texts), D) text features, not normalised."""
+        ...
+
+
+def squash_batch(images: Sequence[np.ndarray], size: int, mean: Sequence[float], std: Sequence[float],
+                 interpolation: str = "bicubic") -> torch.Tensor:
+    """Resize every image (aspect ratio not kept, as PIN does) and normalise with the model's constants.
+
+    Resizing runs on float tensors with antialiasing, like torchvision's ``Resize`` on tensors,
+    so a 960x1280 reference shrunk to 224 is not aliased; values are clamped back to the
+    8-bit range as a PIL resize would.
+    """
+    mode = interpolation if interpolation in ("bilinear", "bicubic") else "bilinear"
+    batch = []
+    for image in images:
+        x = torch.from_numpy(np.ascontiguousarray(image[..., :3])).permute(2, 0, 1)[None].float()
+        if x.shape[-2:] != (size, size):
+            x = F.interpolate(x, size=(size, size), mode=mode, align_corners=False, antialias=True).clamp_(0, 255)
+        batch.append(x)
+    x = torch.cat(batch) / 255.0
+    mean_t = torch.tensor(mean, dtype=x.dtype).view(1, 3, 1, 1)
+    std_t = torch.tensor(std, dtype=x.dtype).view(1, 3, 1, 1)
+    return (x - mean_t) / std_t
+
+
+def _checkpoint_in(path: Path, names: Sequence[str]) -> Path:
+    if path.is_file():
+        return path
+    for name in names:
+        if (path / name).is_file():
+            return path / name
+    raise WeightsError(f"weights folder {path} holds none of {', '.join(names)}")
+
+
+def resolve_checkpoint(spec: WeightsSpec, hub_id: str, override: str | None, names: Sequence[str],
+                       download: Callable[[str], str]) -> Path:
+    """The local checkpoint file: the user's override, else the hub copy (cached, or fetched when online).
+
+    Any hub failure becomes a WeightsError naming the hub id, because "offline and not cached"
+    is the common case here and the fix (pass ``weights=``) should be in the message.
+    """
+    from huggingface_hub.errors import EntryNotFoundError
+
+    local = spec.local_path(override)
+    if local is not None:
+        return _checkpoint_in(local, names)
+    try:
+        return Path(download(hub_id))
+    except (OSError, ValueError, RuntimeError, EntryNotFoundError) as exc:
+        raise WeightsError(f"cannot get the weights of hub id {hub_id!r} ({type(exc).__name__}: {exc}); "
+                           f"download them once, or pass weights=<local file or folder>") from exc
+
+
+class TimmBackbone:
+    """A timm ViT: patch tokens after the final norm (``forward_features``), CLS via the model's own pooling."""
+
+    def __init__(self, model_name: str, checkpoint: Path, img_size: int, device: str = "cpu") -> None:
+        import timm
+        from timm.data import resolve_model_data_config
+
+        # pretrained=True with a file overlay runs timm's own checkpoint filters (e.g. the original
+        # DINO .pth layout), so a hub download and a local file take the same loading path
+        self.model = timm.create_model(model_name, pretrained=True, pretrained_cfg_overlay=dict(file=str(checkpoint)),
+                                       img_size=img_size, num_classes=0).to(device).eval()
+        grid = tuple(self.model.patch_embed.grid_size)
+        if grid[0] != grid[1]:
+            raise ValueError(f"timm model {model_name}: non-square patch grid {grid}")
+        data = resolve_model_data_config(self.model)
+        self.mean, self.std, self.interpolation = data["mean"], data["std"], data["interpolation"]
+        self.input_size, self.grid, self.device = img_size, grid[0], device
+        self.num_prefix_tokens = self.model.num_prefix_tokens
+
+    @torch.inference_mode()
+    def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
+        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
+        tokens = self.model.forward_features(x)
+        cls = self.model.forward_head(tokens, pre_logits=True)
+        return PatchFeatures(cls=cls.float().cpu(), patches=tokens[:, self.num_prefix_tokens:].float().cpu())
+
+
+class OpenClipBackbone:
+    """An open_clip ViT with every token projected into the joint image-text space.
+
+    CLIP only projects the pooled CLS token; comparing patches with text (or with projected
+    reference prototypes) needs the final layer norm and the visual projection applied to each
+    patch token too, which ``forward_intermediates(normalize_intermediates=True)`` plus ``proj`` does.
+    """
+
+    def __init__(self, model_name: str, checkpoint: Path, img_size: int, quick_gelu: bool,
+                 device: str = "cpu") -> None:
+        import open_clip
+        from open_clip.transformer import VisionTransformer
+
+        # a file path carries no tag, so open_clip cannot know OpenAI's QuickGELU: the config says it
+        model = open_clip.create_model(model_name, pretrained=str(checkpoint), force_quick_gelu=quick_gelu,
+                                       force_image_size=img_size, device=device)
+        if not isinstance(model.visual, VisionTransformer) or model.visual.proj is None:
+            raise ValueError(f"open_clip model {model_name}: patch tokens need open_clip's own projected "
+                             f"VisionTransformer, got {type(model.visual).__name__}")
+        self.model = model.eval()
+        self.tokenizer = open_clip.get_tokenizer(model_name)
+        pre = open_clip.get_model_preprocess_cfg(model)
+        self.mean = pre.get("mean", open_clip.OPENAI_DATASET_MEAN)
+        self.std = pre.get("std", open_clip.OPENAI_DATASET_STD)
+        self.interpolation = pre.get("interpolation", "bicubic")
+        gh, gw = model.visual.grid_size
+        if gh != gw:
+            raise ValueError(f"open_clip model {model_name}: non-square patch grid {(gh, gw)}")
+        self.input_size, self.grid, self.device = img_size, gh, device
+
+    @torch.inference_mode()
+    def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
+        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
+        visual = self.model.visual
+        out = visual.forward_intermediates(x, indices=1, normalize_intermediates=True, output_fmt="NLC")
+        patches = out["image_intermediates"][-1] @ visual.proj
+        return PatchFeatures(cls=out["image_features"].float().cpu(), patches=patches.float().cpu())
+
+    @torch.inference_mode()
+    def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
+        tokens = self.tokenizer(list(texts)).to(self.device)
+        return self.model.encode_text(tokens).float().cpu()

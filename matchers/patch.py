@@ -1,0 +1,306 @@
+"""Patch-similarity matchers (PIN's DINO, DINOv2, CLIP visual and CLIP textual baselines).
+
+Every observation patch is compared by cosine with a few target vectors (one prototype per
+reference view, or one text feature per description); its score is the max over targets,
+the crop's score the max over patches, and every patch centre comes back as a point with its
+own score so that ``points_at(sigma)`` gives the paper's "centres of the patches above sigma"
+for any sigma. The math lives in ``PatchSimilarityMatcher`` and a few functions, independent
+of the backbone, so a stub backbone with hand-set tokens checks it exactly.
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import ClassVar
+
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from matchers.backbones import (
+    OPEN_CLIP_FILES,
+    TIMM_FILES,
+    OpenClipBackbone,
+    PatchBackbone,
+    TextBackbone,
+    TimmBackbone,
+    resolve_checkpoint,
+)
+from pin_match.frameset import Target
+from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.registry import register_matcher
+from pin_match.weights import WeightsError, WeightsSpec
+
+# ------------------------------------------------------------------------------------------ math
+
+
+def alpha_to_grid(alpha: np.ndarray, grid: int) -> torch.Tensor:
+    """The reference's alpha mask in [0, 1] resized bilinearly to the patch grid, as PIN does.
+
+    Plain bilinear sampling can miss an object much smaller than a patch (all weights 0, so
+    no prototype); only then the area average is used instead, which is non-zero wherever
+    the object is.
+    """
+    a = torch.from_numpy(np.ascontiguousarray(alpha)).float().div(255.0)[None, None]
+    weights = F.interpolate(a, size=(grid, grid), mode="bilinear", align_corners=False)[0, 0]
+    if float(weights.sum()) <= 0.0:
+        weights = F.adaptive_avg_pool2d(a, (grid, grid))[0, 0]
+    return weights
+
+
+def reference_prototype(patches: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
+    """Mask-weighted mean of one view's patch tokens: sum(mask x token) / sum(mask); (N, D), (g, g) -> (D,)."""
+    w = weights.reshape(-1, 1).to(patches.dtype)
+    return (w * patches).sum(0) / w.sum()
+
+
+def patch_similarity(patches: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
+    """Per patch, the max over targets of the cosine similarity; (B, N, D), (T, D) -> (B, N)."""
+    sims = F.normalize(patches, dim=-1) @ F.normalize(targets, dim=-1).T
+    return sims.amax(dim=-1)
+
+
+def patch_centres(grid: int, width: int, height: int) -> np.ndarray:
+    """Row-major patch centres (x, y) at round((i + 0.5) x scale) in pixels of an image squashed to the grid.
+
+    ``np.rint`` rounds halves to even, exactly as Python's ``round`` in the paper's formula.
+    """
+    xs = np.rint((np.arange(grid) + 0.5) * (width / grid))
+    ys = np.rint((np.arange(grid) + 0.5) * (height / grid))
+    yy, xx = np.meshgrid(ys, xs, indexing="ij")
+    return np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float32)
+
+
+def text_target(encode_text: Callable[[Sequence[str]], torch.Tensor], description: str,
+                templates: Sequence[Callable[[str], str] | str]) -> torch.Tensor:
+    """One description through the prompt templates: per-template features normalised, averaged, normalised.
+
+    This is CLIP's zero-shot recipe (and CoW's); normalising before averaging keeps one
+    template with a large feature norm from dominating.
+    """
+    prompts = [t(description) if callable(t) else t.format(description) for t in templates]
+    feats = F.normalize(encode_text(prompts).float(), dim=-1)
+    return F.normalize(feats.mean(0), dim=0)
+
+
+# ------------------------------------------------------------------------------------------ matchers
+
+
+@dataclass
+class PatchConfig(MatcherConfig):
+    """Backbone settings; ``model_name`` and ``img_size`` may name a smaller model for tests and ablations."""
+
+    model_name: str = ""
+    img_size: int = 224
+    hub_id: str | None = field(default=None, metadata={"help": "hub repository of the weights; default: the "
+                                                               "matcher's own"})
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not self.model_name:
+            raise ConfigError(f"{type(self).__name__}: model_name must not be empty")
+        if self.img_size < 8:
+            raise ConfigError(f"{type(self).__name__}: img_size={self.img_size} is too small")
+
+
+class PatchSimilarityMatcher(CropMatcher):
+    """Max-over-targets cosine between observation patches and target vectors.
+
+    Subclasses say how the backbone is built (``_build_backbone``) and what the target
+    vectors are (``_target_vectors``). A ready backbone may be passed in, which tests use
+    for a stub and callers may use to share one loaded model between matchers.
+    """
+
+    Config: ClassVar[type[MatcherConfig]] = PatchConfig
+    weights_spec: ClassVar[WeightsSpec]
+
+    def __init__(self, cfg: MatcherConfig | None = None, *, backbone: PatchBackbone | None = None) -> None:
+        super().__init__(cfg)
+        self._backbone = backbone
+        self._targets: torch.Tensor | None = None
+
+    @property
+    def backbone(self) -> PatchBackbone:
+        """Built on first use, never at construction, so listing and configuring matchers stays offline."""
+        if self._backbone is None:
+            self._backbone = self._build_backbone()
+        return self._backbone
+
+    @property
+    def targets(self) -> torch.Tensor:
+        """The prepared target vectors (T, D), unnormalised: one per reference view or per description."""
+        if self._targets is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) first")
+        return self._targets
+
+    def checkpoint(self, names: Sequence[str], download: Callable[[str], str]) -> Path:
+        """The local weights file for this config: ``weights=`` when given, else the (cached) hub copy."""
+        cfg = self.cfg
+        hub_id = cfg.hub_id or self.weights_spec.hub_id
+        try:
+            return resolve_checkpoint(self.weights_spec, hub_id, cfg.weights, names, download)
+        except WeightsError as exc:  # say which matcher asked
+            raise WeightsError(f"matcher {self.display_name}: {exc}") from exc
+
+    @abstractmethod
+    def _build_backbone(self) -> PatchBackbone: ...
+
+    @abstractmethod
+    def _target_vectors(self, target: Target) -> torch.Tensor: ...
+
+    def _prepare(self, target: Target) -> None:
+        targets = self._target_vectors(target)
+        if targets.ndim != 2 or not torch.isfinite(targets).all():
+            raise MatcherError(f"matcher {self.display_name}: target {target.object_id} gave invalid target "
+                               f"vectors of shape {tuple(targets.shape)}")
+        self._targets = targets
+
+    def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
+        backbone = self.backbone
+        feats = backbone.encode(crops).patches
+        scores = patch_similarity(feats, self.targets).numpy().astype(np.float32)
+        grid = backbone.grid
+        results = []
+        for crop, s in zip(crops, scores):
+            height, width = crop.shape[:2]
+            results.append(MatchResult(score=float(s.max()), points=patch_centres(grid, width, height),
+                                       point_scores=s, heatmap=s.reshape(grid, grid)))
+        return results
+
+    def embed_reference(self, view: np.ndarray) -> np.ndarray:
+        """The backbone's global (CLS) embedding of the whole squashed RGB reference."""
+        return self.backbone.encode([view[..., :3]]).cls[0].numpy().astype(np.float32)
+
+
+class ReferencePrototypeMatcher(PatchSimilarityMatcher):
+    """Visual targets: one mask-weighted patch-token prototype per reference view."""
+
+    modality = Modality.VISUAL
+
+    def _target_vectors(self, target: Target) -> torch.Tensor:
+        backbone = self.backbone
+        feats = backbone.encode([v[..., :3] for v in target.views]).patches
+        return torch.stack([reference_prototype(p, alpha_to_grid(v[..., 3], backbone.grid))
+                            for p, v in zip(feats, target.views)])
+
+
+# ------------------------------------------------------------------------------------------ timm: DINO, DINOv2
+
+
+@dataclass
+class DinoConfig(PatchConfig):
+    model_name: str = "vit_base_patch16_224.dino"
+    img_size: int = 224
+
+
+@dataclass
+class Dinov2Config(PatchConfig):
+    model_name: str = "vit_base_patch14_dinov2.lvd142m"
+    img_size: int = 518
+
+
+def _timm_download(hub_id: str) -> str:
+    from huggingface_hub import hf_hub_download
+
+    return hf_hub_download(hub_id, TIMM_FILES[0])
+
+
+class TimmPrototypeMatcher(ReferencePrototypeMatcher):
+    def _build_backbone(self) -> PatchBackbone:
+        cfg = self.cfg
+        return TimmBackbone(cfg.model_name, self.checkpoint(TIMM_FILES, _timm_download), cfg.img_size, cfg.device)
+
+
+@register_matcher("dino")
+class DinoMatcher(TimmPrototypeMatcher):
+    """DINO ViT-B/16 (ImageNet-1k, self-supervised) at 224: 14 x 14 patches."""
+
+    Config = DinoConfig
+    weights_spec = WeightsSpec("timm/vit_base_patch16_224.dino", filename="model.safetensors", license="apache-2.0")
+    hub_id = weights_spec.hub_id
+    license = weights_spec.license
+    default_sigma = 0.575
+    paper = "Caron et al., Emerging Properties in Self-Supervised Vision Transformers, ICCV 2021"
+
+
+@register_matcher("dinov2")
+class Dinov2Matcher(TimmPrototypeMatcher):
+    """DINOv2 ViT-B/14 (LVD-142M) at 518: 37 x 37 patches."""
+
+    Config = Dinov2Config
+    weights_spec = WeightsSpec("timm/vit_base_patch14_dinov2.lvd142m", filename="model.safetensors",
+                               license="apache-2.0")
+    hub_id = weights_spec.hub_id
+    license = weights_spec.license
+    default_sigma = 0.5
+    paper = "Oquab et al., DINOv2: Learning Robust Visual Features without Supervision, TMLR 2024"
+
+
+# ------------------------------------------------------------------------------------------ open_clip: CLIP
+
+
+@dataclass
+class ClipConfig(PatchConfig):
+    model_name: str = "ViT-B-16"
+    img_size: int = 224
+    quick_gelu: bool = True  # OpenAI's weights were trained with QuickGELU
+
+
+CLIP_WEIGHTS = WeightsSpec("timm/vit_base_patch16_clip_224.openai", filename="open_clip_pytorch_model.bin",
+                           license="MIT")
+CLIP_PAPER = "Radford et al., Learning Transferable Visual Models From Natural Language Supervision, ICML 2021"
+
+
+def _open_clip_download(hub_id: str) -> str:
+    from open_clip.pretrained import download_pretrained_from_hf
+
+    return download_pretrained_from_hf(hub_id)  # the file open_clip itself would fetch for the 'openai' tag
+
+
+def _open_clip_backbone(matcher: PatchSimilarityMatcher) -> OpenClipBackbone:
+    cfg = matcher.cfg
+    return OpenClipBackbone(cfg.model_name, matcher.checkpoint(OPEN_CLIP_FILES, _open_clip_download), cfg.img_size,
+                            cfg.quick_gelu, cfg.device)
+
+
+@register_matcher("clip")
+class ClipMatcher(ReferencePrototypeMatcher):
+    """CLIP ViT-B/16 (OpenAI) at 224, reference prototypes and patches in the joint space."""
+
+    Config = ClipConfig
+    weights_spec = CLIP_WEIGHTS
+    hub_id = CLIP_WEIGHTS.hub_id
+    license = CLIP_WEIGHTS.license
+    default_sigma = 0.575
+    paper = CLIP_PAPER
+
+    def _build_backbone(self) -> PatchBackbone:
+        return _open_clip_backbone(self)
+
+
+@register_matcher("clip-text")
+class ClipTextMatcher(PatchSimilarityMatcher):
+    """CLIP ViT-B/16 (OpenAI): patches against each description put through CLIP's 80 ImageNet templates."""
+
+    Config = ClipConfig
+    weights_spec = CLIP_WEIGHTS
+    hub_id = CLIP_WEIGHTS.hub_id
+    license = CLIP_WEIGHTS.license
+    modality = Modality.TEXTUAL
+    default_sigma = 0.28
+    paper = CLIP_PAPER
+
+    def _build_backbone(self) -> PatchBackbone:
+        return _open_clip_backbone(self)
+
+    def _target_vectors(self, target: Target) -> torch.Tensor:
+        from open_clip.zero_shot_metadata import OPENAI_IMAGENET_TEMPLATES
+
+        backbone = self.backbone
+        if not hasattr(backbone, "encode_text"):
+            raise MatcherError(f"matcher {self.display_name}: backbone {type(backbone).__name__} has no text encoder")
+        text: TextBackbone = backbone
+        return torch.stack([text_target(text.encode_text, d, OPENAI_IMAGENET_TEMPLATES) for d in target.descriptions])
