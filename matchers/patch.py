@@ -32,7 +32,7 @@ from matchers.backbones import (
 from pin_match.frameset import Target
 from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatcherError, MatchResult, Modality
 from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.weights import WeightsError, WeightsSpec, misfit
 
 # ------------------------------------------------------------------------------------------ math
 
@@ -126,7 +126,13 @@ class PatchSimilarityMatcher(CropMatcher):
     def backbone(self) -> PatchBackbone:
         """Built on first use, never at construction, so listing and configuring matchers stays offline."""
         if self._backbone is None:
-            self._backbone = self._build_backbone()
+            try:
+                self._backbone = self._build_backbone()
+            except WeightsError:
+                raise
+            except (RuntimeError, ValueError, KeyError, OSError) as exc:
+                source = self.cfg.weights or self.cfg.hub_id or self.weights_spec.hub_id
+                raise misfit(f"matcher {self.display_name}", source, self.cfg.model_name, exc) from exc
         return self._backbone
 
     @property

@@ -44,3 +44,13 @@ class WeightsSpec:
         probe = self.filename or "config.json"
         hit = try_to_load_from_cache(self.hub_id, probe)
         return isinstance(hit, str)
+
+
+def misfit(who: str, source: str | os.PathLike, architecture: str, exc: BaseException) -> WeightsError:
+    """The error for a checkpoint that exists but cannot be loaded into the configured model.
+
+    Libraries report this as a wall of per-tensor size mismatches; the user needs the file,
+    the architecture it was loaded into, and the first line of the library's reason.
+    """
+    reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+    return WeightsError(f"{who}: weights {source} do not fit {architecture} ({type(exc).__name__}: {reason})")

@@ -1,0 +1,42 @@
+"""Weights that are missing or belong to another architecture are refused with the file named."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import safetensors.torch
+
+from conftest import make_view
+from pin_match import Target, create_matcher
+from pin_match.weights import WeightsError, WeightsSpec
+
+
+def _target() -> Target:
+    v = make_view((200, 30, 30))
+    return Target("o", "mug", (v, v, v), ("a", "b", "c"))
+
+
+def test_missing_weights_file_is_named(tmp_path):
+    missing = tmp_path / "nope.safetensors"
+    m = create_matcher("dino", model_name="vit_tiny_patch16_224", weights=str(missing))  # construction loads nothing
+    with pytest.raises(WeightsError, match=r"nope\.safetensors does not exist"):
+        m.prepare(_target())
+    assert not WeightsSpec("some/hub-id").available(str(missing))
+    assert WeightsSpec("some/hub-id").available(str(tmp_path))
+
+
+def test_weights_of_another_architecture_are_refused(tmp_path, monkeypatch):
+    import timm
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    small = timm.create_model("vit_small_patch16_224", pretrained=False, num_classes=0, img_size=32)
+    path = tmp_path / "vit_small.safetensors"
+    safetensors.torch.save_file(small.state_dict(), path)
+    m = create_matcher("dino", model_name="vit_tiny_patch16_224", img_size=32, weights=str(path))
+    with pytest.raises(WeightsError, match=r"matcher dino: weights .*vit_small\.safetensors do not fit "
+                                           r"vit_tiny_patch16_224 \(RuntimeError: .*state_dict"):
+        m.prepare(_target())
+    # the same file loads into the architecture it belongs to
+    ok = create_matcher("dino", model_name="vit_small_patch16_224", img_size=32, weights=str(path))
+    ok.prepare(_target())
+    assert np.isfinite(ok.match(np.zeros((64, 48, 3), np.uint8)).score)
