@@ -1,0 +1,428 @@
+"""Keypoint matchers: SuperGlue (PIN's baseline), LightGlue, and an IEVE-style composite of the two kinds.
+
+SuperPoint finds keypoints in the observation and in PIN's six prepared references (three
+views, each at two scales on a white 360x360 canvas); a graph matcher pairs them. The
+references' keypoints are computed once per target and the transformers model's
+pair-matching stage is called directly, because its ``forward`` only pairs images of one
+size and would run SuperPoint on every reference again for every frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from abc import abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import cv2
+import numpy as np
+import torch
+
+from matchers.hf_load import load_pretrained
+from pin_match.frameset import Target
+from pin_match.matcher import ConfigError, CropMatcher, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.registry import create_matcher, get_matcher_class, register_matcher
+from pin_match.weights import WeightsError, WeightsSpec
+
+SUPERGLUE_WEIGHTS = WeightsSpec("magic-leap-community/superglue_indoor",
+                                license="Magic Leap non-commercial research license (SuperPoint and SuperGlue)")
+LIGHTGLUE_WEIGHTS = WeightsSpec("ETH-CVG/lightglue_superpoint",
+                                license="Apache-2.0 (LightGlue); SuperPoint's Magic Leap non-commercial license")
+
+REFERENCE_PAD = 30        # pixels of background kept around the object's mask
+REFERENCE_CANVAS = 360    # side of the square canvas every prepared reference is drawn on
+REFERENCE_SIDES = (360, 180)  # each view at two scales, so near and far objects both match
+
+
+# ---------------------------------------------------------------------------- reference preparation
+def square_box(alpha: np.ndarray, pad: int) -> tuple[int, int, int, int]:
+    """The square ``(x0, y0, x1, y1)`` (x1, y1 exclusive) centred on the mask's bounding box.
+
+    Its side is the box's longer side plus ``pad`` on both ends; it may stick out of the image.
+    """
+    ys, xs = np.nonzero(alpha)
+    if not len(xs):
+        raise ValueError("square_box: the alpha mask is empty")
+    bx0, by0, bx1, by1 = int(xs.min()), int(ys.min()), int(xs.max()) + 1, int(ys.max()) + 1
+    side = max(bx1 - bx0, by1 - by0) + 2 * pad
+    x0 = bx0 - (side - (bx1 - bx0)) // 2
+    y0 = by0 - (side - (by1 - by0)) // 2
+    return x0, y0, x0 + side, y0 + side
+
+
+def take_box(image: np.ndarray, box: tuple[int, int, int, int], fill: Any) -> np.ndarray:
+    """The pixels of ``box``; where it leaves the image they are ``fill`` (the background colour)."""
+    x0, y0, x1, y1 = box
+    out = np.full((y1 - y0, x1 - x0) + image.shape[2:], fill, image.dtype)
+    h, w = image.shape[:2]
+    sx0, sy0, sx1, sy1 = max(x0, 0), max(y0, 0), min(x1, w), min(y1, h)
+    if sx1 > sx0 and sy1 > sy0:
+        out[sy0 - y0:sy1 - y0, sx0 - x0:sx1 - x0] = image[sy0:sy1, sx0:sx1]
+    return out
+
+
+@dataclass(frozen=True)
+class ReferenceImage:
+    gray: np.ndarray  # canvas x canvas uint8, white background
+    mask: np.ndarray  # canvas x canvas bool, the object's pixels
+
+
+def prepare_references(views: Sequence[np.ndarray], pad: int = REFERENCE_PAD, canvas: int = REFERENCE_CANVAS,
+                       sides: Sequence[int] = REFERENCE_SIDES) -> list[ReferenceImage]:
+    """PIN's SuperGlue references: white background, square crop around the mask, each view at every side.
+
+    The smaller scales are centred on the canvas. Order: view-major (view 0 at every side, then view 1...).
+    """
+    out = []
+    for view in views:
+        alpha = view[..., 3:4].astype(np.float32) / 255.0
+        rgb = np.round(view[..., :3] * alpha + 255.0 * (1.0 - alpha)).astype(np.uint8)
+        box = square_box(view[..., 3] > 0, pad)
+        gray = cv2.cvtColor(take_box(rgb, box, 255), cv2.COLOR_RGB2GRAY)
+        mask = take_box((view[..., 3] > 0).astype(np.uint8), box, 0)
+        for side in sides:
+            off = (canvas - side) // 2
+            g = np.full((canvas, canvas), 255, np.uint8)
+            m = np.zeros((canvas, canvas), bool)
+            g[off:off + side, off:off + side] = cv2.resize(gray, (side, side), interpolation=cv2.INTER_AREA)
+            m[off:off + side, off:off + side] = cv2.resize(mask, (side, side), interpolation=cv2.INTER_NEAREST) > 0
+            out.append(ReferenceImage(gray=g, mask=m))
+    return out
+
+
+# ---------------------------------------------------------------------------- keypoints and pairing
+@dataclass
+class Keypoints:
+    """SuperPoint's output for one image, in that image's pixels."""
+
+    xy: torch.Tensor           # (N, 2) x, y
+    scores: torch.Tensor       # (N,)
+    descriptors: torch.Tensor  # (N, D)
+    height: int
+    width: int
+
+
+def detect(detector: torch.nn.Module, grays: Sequence[np.ndarray], device: str) -> list[Keypoints]:
+    """Run SuperPoint on same-size grayscale uint8 images (one batch)."""
+    h, w = grays[0].shape
+    x = torch.from_numpy(np.stack(grays)).to(device=device, dtype=torch.float32)[:, None] / 255.0
+    out = detector(x)
+    size = torch.tensor([w, h], dtype=torch.float32, device=device)
+    found = []
+    for kp, sc, de, mask in zip(out.keypoints, out.scores, out.descriptors, out.mask):
+        n = int(mask.sum())  # SuperPoint pads after the real keypoints
+        found.append(Keypoints(xy=(kp[:n] * size).round(), scores=sc[:n], descriptors=de[:n], height=h, width=w))
+    return found
+
+
+def to_frame_of(xy: torch.Tensor, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> torch.Tensor:
+    """Move keypoints of a ``src`` image so the matcher's normalisation for a ``dst`` image is their own.
+
+    SuperGlue and LightGlue normalise a pair with one image size, ``(xy - size / 2) / (c * max(size))``;
+    this affine map makes that equal to normalising the reference with its own size, as the
+    original SuperGlue code does for two images of different sizes.
+    """
+    (sh, sw), (dh, dw) = src_hw, dst_hw
+    src_centre = xy.new_tensor([sw / 2, sh / 2])
+    dst_centre = xy.new_tensor([dw / 2, dh / 2])
+    return (xy - src_centre) * (max(dh, dw) / max(sh, sw)) + dst_centre
+
+
+@dataclass
+class PairBatch:
+    """One observation against R references, padded to a common keypoint count, as the models take it."""
+
+    keypoints: torch.Tensor    # (R, 2, N, 2), index 0 = observation, 1 = reference
+    descriptors: torch.Tensor  # (R, 2, N, D)
+    scores: torch.Tensor       # (R, 2, N)
+    mask: torch.Tensor         # (R, 2, N) int, 1 = a real keypoint
+
+
+def pair_batch(obs: Keypoints, refs: Sequence[Keypoints]) -> PairBatch:
+    n = max(len(k.xy) for k in (obs, *refs))
+    r, d = len(refs), obs.descriptors.shape[1]
+    device = obs.xy.device
+    batch = PairBatch(torch.zeros(r, 2, n, 2, device=device), torch.zeros(r, 2, n, d, device=device),
+                      torch.zeros(r, 2, n, device=device), torch.zeros(r, 2, n, dtype=torch.int, device=device))
+    for i, ref in enumerate(refs):
+        ref_xy = to_frame_of(ref.xy, (ref.height, ref.width), (obs.height, obs.width))
+        for k, (xy, kps) in enumerate(((obs.xy, obs), (ref_xy, ref))):
+            m = len(xy)
+            batch.keypoints[i, k, :m] = xy
+            batch.descriptors[i, k, :m] = kps.descriptors
+            batch.scores[i, k, :m] = kps.scores
+            batch.mask[i, k, :m] = 1
+    return batch
+
+
+@dataclass
+class PairMatches:
+    """The valid matches of one observation-reference pair."""
+
+    obs_index: np.ndarray   # (M,) observation keypoints with a valid match
+    confidence: np.ndarray  # (M,) their match confidences
+    on_object: np.ndarray   # (M,) bool: the matched reference keypoint lies inside the reference mask
+
+
+def valid_matches(matches0: np.ndarray, matches1: np.ndarray, confidence0: np.ndarray, ref_xy: np.ndarray,
+                  ref_mask: np.ndarray, threshold: float) -> PairMatches:
+    """PIN's rule: a match is valid when it is mutual and its confidence exceeds ``threshold``.
+
+    ``matches0[i]`` is the reference keypoint matched to observation keypoint ``i`` (-1: none),
+    ``matches1[j]`` the observation keypoint matched to reference keypoint ``j``; indices past
+    the reference's real keypoints (padding) never count.
+    """
+    m0 = np.asarray(matches0, np.int64)
+    m1 = np.asarray(matches1, np.int64)
+    conf = np.asarray(confidence0, np.float32)
+    known = (m0 >= 0) & (m0 < min(len(ref_xy), len(m1)))
+    back = np.full(len(m0), -1, np.int64)
+    back[known] = m1[m0[known]]
+    idx = np.nonzero(known & (back == np.arange(len(m0))) & (conf > threshold))[0]
+    h, w = ref_mask.shape
+    xy = np.round(np.asarray(ref_xy, np.float64)[m0[idx]]).astype(np.int64).reshape(-1, 2)
+    on_object = ref_mask[np.clip(xy[:, 1], 0, h - 1), np.clip(xy[:, 0], 0, w - 1)]
+    return PairMatches(obs_index=idx, confidence=conf[idx], on_object=on_object.astype(bool))
+
+
+def object_points(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> np.ndarray:
+    """Observation keypoints matched, in any pair, to a reference keypoint on the object (each once)."""
+    idx = [p.obs_index[p.on_object] for p in pairs]
+    idx = np.unique(np.concatenate(idx)) if idx else np.zeros(0, np.int64)
+    return np.asarray(obs_xy, np.float32).reshape(-1, 2)[idx]
+
+
+def superglue_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
+    """Score = sum of the confidences of all valid matches (all references); points = those on the object."""
+    score = float(sum(p.confidence.sum() for p in pairs))
+    return MatchResult(score=score, points=object_points(pairs, obs_xy))
+
+
+def count_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
+    """Score = number of distinct observation keypoints validly matched to the object in any reference."""
+    points = object_points(pairs, obs_xy)
+    return MatchResult(score=float(len(points)), points=points)
+
+
+# ---------------------------------------------------------------------------- matchers
+@dataclass
+class KeypointConfig(MatcherConfig):
+    crops: str = "whole"  # PIN matches the whole frame; "pin" also works (max over square crops)
+    nms_radius: int = 4
+    keypoint_threshold: float = 0.005
+    max_keypoints: int = 1024
+    match_threshold: float = field(default=0.2, metadata={"help": "valid matches: mutual and confidence above"})
+
+
+class GlueMatcher(CropMatcher):
+    """SuperPoint keypoints of the grayscale frame matched against PIN's six prepared references.
+
+    Subclasses say how to load their model, run its pair-matching stage and turn the valid matches into a verdict.
+    """
+
+    weights_spec: ClassVar[WeightsSpec]
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        super().__init__(cfg)
+        self._model: torch.nn.Module | None = None
+        self._refs: list[tuple[Keypoints, np.ndarray, np.ndarray]] = []  # keypoints, their xy as numpy, mask
+
+    @abstractmethod
+    def _load(self, source: str) -> torch.nn.Module: ...
+
+    @abstractmethod
+    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+        """(matches, confidences), each (R, 2, N)."""
+
+    @abstractmethod
+    def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult: ...
+
+    def _configure_detector(self, detector_config: Any) -> None:
+        """SuperPoint reads these when it is built, so they go into the config before loading."""
+        detector_config.nms_radius = self.cfg.nms_radius
+        detector_config.keypoint_threshold = self.cfg.keypoint_threshold
+        detector_config.max_keypoints = self.cfg.max_keypoints
+
+    @torch.inference_mode()
+    def _prepare(self, target: Target) -> None:
+        if self._model is None:
+            model = load_pretrained(self.weights_spec, self.cfg.weights, f"matcher {self.display_name}", self._load)
+            self._model = model.to(self.cfg.device).eval()
+        refs = prepare_references(target.views)
+        found = detect(self._model.keypoint_detector, [r.gray for r in refs], self.cfg.device)
+        # a reference without keypoints can match nothing; leaving it out keeps the pair batch well-formed
+        self._refs = [(k, k.xy.cpu().numpy(), r.mask) for k, r in zip(found, refs) if len(k.xy)]
+
+    @torch.inference_mode()
+    def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
+        return [self._match_one(crop) for crop in crops]
+
+    def _match_one(self, crop: np.ndarray) -> MatchResult:
+        obs = detect(self._model.keypoint_detector, [cv2.cvtColor(crop, cv2.COLOR_RGB2GRAY)], self.cfg.device)[0]
+        if not len(obs.xy) or not self._refs:
+            return MatchResult(score=0.0)
+        matches, conf = self._glue(pair_batch(obs, [k for k, _, _ in self._refs]), obs.height, obs.width)
+        matches, conf = matches.cpu().numpy(), conf.float().cpu().numpy()
+        n = len(obs.xy)
+        pairs = [valid_matches(matches[i, 0, :n], matches[i, 1, :len(xy)], conf[i, 0, :n], xy, mask,
+                               self.cfg.match_threshold)
+                 for i, (_, xy, mask) in enumerate(self._refs)]
+        return self._verdict(pairs, obs.xy.cpu().numpy())
+
+
+@dataclass
+class SuperGlueMatcherConfig(KeypointConfig):
+    sinkhorn_iterations: int = 20
+
+
+@register_matcher("superglue")
+class SuperGlueMatcher(GlueMatcher):
+    """PIN's SuperGlue baseline: score = sum of the confidences of the valid matches over the six references."""
+
+    Config = SuperGlueMatcherConfig
+    modality = Modality.VISUAL
+    default_sigma = 8.0
+    weights_spec = SUPERGLUE_WEIGHTS
+    hub_id = SUPERGLUE_WEIGHTS.hub_id
+    license = SUPERGLUE_WEIGHTS.license
+    paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
+
+    def _load(self, source: str) -> torch.nn.Module:
+        from transformers import SuperGlueConfig, SuperGlueForKeypointMatching
+
+        config = SuperGlueConfig.from_pretrained(source)
+        config.sinkhorn_iterations = self.cfg.sinkhorn_iterations
+        self._configure_detector(config.keypoint_detector_config)
+        return SuperGlueForKeypointMatching.from_pretrained(source, config=config)
+
+    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+        matches, conf, _, _ = self._model._match_image_pair(pairs.keypoints, pairs.descriptors, pairs.scores,
+                                                            height, width, mask=pairs.mask)
+        return matches, conf
+
+    def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
+        return superglue_verdict(pairs, obs_xy)
+
+
+@dataclass
+class LightGlueMatcherConfig(KeypointConfig):
+    match_threshold: float = field(default=0.1, metadata={"help": "LightGlue's own filter threshold"})
+
+
+@register_matcher("lightglue")
+class LightGlueMatcher(GlueMatcher):
+    """SuperPoint + LightGlue against PIN's six references; score = number of observation keypoints matched to
+    the object (distinct keypoints, so one seen in several references counts once)."""
+
+    Config = LightGlueMatcherConfig
+    modality = Modality.VISUAL
+    default_sigma = 100.0  # IEVE's "confirmed" match count
+    weights_spec = LIGHTGLUE_WEIGHTS
+    hub_id = LIGHTGLUE_WEIGHTS.hub_id
+    license = LIGHTGLUE_WEIGHTS.license
+    paper = "Lindenberger et al., LightGlue: Local Feature Matching at Light Speed, ICCV 2023"
+
+    def _load(self, source: str) -> torch.nn.Module:
+        from transformers import LightGlueConfig, LightGlueForKeypointMatching
+
+        config = LightGlueConfig.from_pretrained(source)
+        config.filter_threshold = 0.0  # the threshold is applied once, in valid_matches
+        self._configure_detector(config.keypoint_detector_config)
+        return LightGlueForKeypointMatching.from_pretrained(source, config=config)
+
+    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
+        matches, conf, *_ = self._model._match_image_pair(pairs.keypoints, pairs.descriptors, height, width,
+                                                          mask=pairs.mask)
+        r = pairs.keypoints.shape[0]
+        return matches.reshape(r, 2, -1), conf.reshape(r, 2, -1)
+
+    def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
+        return count_verdict(pairs, obs_xy)
+
+
+# ---------------------------------------------------------------------------- IEVE-style composite
+def gated_count(points: np.ndarray, boxes: np.ndarray | None, box_scores: np.ndarray | None,
+                gate_sigma: float, gate: str) -> MatchResult:
+    """IEVE's verdict: the keypoint matches inside the gate's best box, if that box reaches ``gate_sigma``.
+
+    Score = their number (0 when the gate is closed); points = those matches; the box is kept.
+    """
+    if boxes is None or box_scores is None:
+        raise MatcherError(f"matcher ieve: gate {gate!r} returns no boxes; choose a detector as the gate")
+    box_scores = np.asarray(box_scores, np.float32).reshape(-1)
+    if not len(box_scores) or box_scores.max() < gate_sigma:
+        return MatchResult(score=0.0)
+    best = int(np.argmax(box_scores))
+    x0, y0, x1, y1 = np.asarray(boxes, np.float32).reshape(-1, 4)[best]
+    points = np.asarray(points, np.float32).reshape(-1, 2)
+    inside = (points[:, 0] >= x0) & (points[:, 0] <= x1) & (points[:, 1] >= y0) & (points[:, 1] <= y1)
+    return MatchResult(score=float(inside.sum()), points=points[inside],
+                       boxes=np.array([[x0, y0, x1, y1]], np.float32), box_scores=box_scores[best:best + 1])
+
+
+@dataclass
+class IeveConfig(MatcherConfig):
+    gate: str = field(default="owl", metadata={"help": "registered matcher giving category boxes"})
+    gate_weights: str | None = field(default=None, metadata={"help": "weights= of the gate"})
+    gate_sigma: float = field(default=0.2, metadata={"help": "the gate's own box threshold (IEVE's detector)"})
+    keypoints: str = field(default="lightglue", metadata={"help": "registered matcher giving matched keypoints"})
+    keypoints_weights: str | None = field(default=None, metadata={"help": "weights= of the keypoint matcher"})
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.weights is not None:
+            raise ConfigError("matcher ieve has no weights of its own: set gate_weights= and keypoints_weights=")
+        if "ieve" in (self.gate, self.keypoints):
+            raise ConfigError("matcher ieve cannot use itself as a part")
+
+
+@register_matcher("ieve")
+class IeveMatcher(Matcher):
+    """IEVE-style: a category detector opens a box, keypoint matches inside it are counted.
+
+    Both parts are registered matchers built by name. A gate whose config has a ``query`` field
+    (OWL) is switched to ``query="category"`` and so reads the category label, which is why
+    this matcher is of the category modality. The gate threshold is internal to the design
+    (IEVE's detector has one); the final score, the match count, is still left un-thresholded.
+    The ``crops`` policy of this config is unused: each part keeps its own.
+    """
+
+    Config = IeveConfig
+    modality = Modality.CATEGORY
+    default_sigma = 100.0  # IEVE: > 100 matches confirm the goal (60: near it)
+    paper = ("Lei et al., Instance-aware Exploration-Verification-Exploitation for Instance ImageGoal Navigation, "
+             "CVPR 2024")
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        super().__init__(cfg)
+        gate_options: dict[str, Any] = {}
+        if "query" in {f.name for f in dataclasses.fields(get_matcher_class(self.cfg.gate).Config)}:
+            gate_options["query"] = "category"
+        if self.cfg.gate_weights is not None:
+            gate_options["weights"] = self.cfg.gate_weights
+        keypoint_options = {"weights": self.cfg.keypoints_weights} if self.cfg.keypoints_weights is not None else {}
+        self.gate = create_matcher(self.cfg.gate, **gate_options)
+        self.keypoints = create_matcher(self.cfg.keypoints, **keypoint_options)
+
+    @property
+    def config_hash(self) -> str:
+        """Also covers the parts' ids, so a new version of either part never reuses the composite's caches."""
+        payload = json.dumps([super().config_hash, self.gate.id, self.keypoints.id])
+        return hashlib.sha256(payload.encode()).hexdigest()[:12]
+
+    def _prepare(self, target: Target) -> None:
+        # the full target: a category-modality gate gets the label, any other gate strips it itself
+        for part, option in ((self.gate, "gate_weights"), (self.keypoints, "keypoints_weights")):
+            try:
+                part.prepare(target)
+            except WeightsError as exc:
+                raise WeightsError(f"matcher ieve, part {part.display_name!r} (set {option}=): {exc}") from exc
+
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        gates = self.gate.match_batch(images)
+        keypoints = self.keypoints.match_batch(images)
+        return [gated_count(k.points, g.boxes, g.box_scores, self.cfg.gate_sigma, self.cfg.gate)
+                for g, k in zip(gates, keypoints)]

@@ -1,0 +1,282 @@
+"""Keypoint matchers: PIN's reference preparation and match rules on hand-made inputs, the IEVE composite with
+hand-set parts, and SuperGlue / LightGlue on tiny random checkpoints."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+import torch
+import transformers
+from transformers.models.lightglue.modeling_lightglue import normalize_keypoints as lightglue_normalize
+from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
+
+from conftest import make_view
+from matchers.keypoint import (
+    count_verdict,
+    gated_count,
+    prepare_references,
+    square_box,
+    superglue_verdict,
+    to_frame_of,
+    valid_matches,
+)
+from pin_match import registry
+from pin_match.frameset import Target
+from pin_match.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.registry import create_matcher
+
+TINY_SUPERPOINT = dict(encoder_hidden_sizes=[8, 8, 16, 16], decoder_hidden_size=16, descriptor_decoder_dim=32)
+
+
+@pytest.fixture(scope="module")
+def superglue_dir(tmp_path_factory):
+    torch.manual_seed(0)
+    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
+                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"],
+                                          num_attention_heads=2)
+    path = tmp_path_factory.mktemp("superglue")
+    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def lightglue_dir(tmp_path_factory):
+    torch.manual_seed(0)
+    config = transformers.LightGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, descriptor_dim=32,
+                                          num_hidden_layers=2, num_attention_heads=2)
+    path = tmp_path_factory.mktemp("lightglue")
+    transformers.LightGlueForKeypointMatching(config).save_pretrained(path)
+    return str(path)
+
+
+@pytest.fixture(scope="module")
+def target():
+    views = tuple(make_view(c, stripe=(255, 255, 0)) for c in [(200, 30, 30), (30, 200, 30), (30, 30, 200)])
+    return Target("mug_x", "mug", views, ("a red mug", "a striped cup", "a mug with yellow stripes"))
+
+
+# ---------------------------------------------------------------------------- reference preparation
+def rectangle_view(height=300, width=400, rows=(100, 200), cols=(50, 110), colour=(0, 0, 0)):
+    view = np.zeros((height, width, 4), np.uint8)
+    view[..., :3] = (10, 200, 10)  # what the render put behind the object: must become white
+    view[rows[0]:rows[1], cols[0]:cols[1], :3] = colour
+    view[rows[0]:rows[1], cols[0]:cols[1], 3] = 255
+    return view
+
+
+def test_square_box_is_centred_on_the_mask_and_padded_by_30():
+    alpha = rectangle_view()[..., 3] > 0  # 100 rows x 60 columns at (x 50, y 100)
+    # side = 100 + 2 * 30 = 160, centred on (80, 150)
+    assert square_box(alpha, 30) == (0, 70, 160, 230)
+    assert square_box(alpha, 0) == (30, 100, 130, 200)
+
+
+def test_six_references_white_background_mask_scaled_into_the_canvas():
+    view = rectangle_view()
+    refs = prepare_references([view, view, view])
+    assert len(refs) == 6
+    kernel = np.ones((5, 5), np.uint8)  # resampling blends the 2 px along the edge
+    for ref in refs:
+        assert ref.gray.shape == ref.mask.shape == (360, 360) and ref.gray.dtype == np.uint8
+        near = cv2.dilate(ref.mask.astype(np.uint8), kernel) > 0
+        inner = cv2.erode(ref.mask.astype(np.uint8), kernel) > 0
+        assert (ref.gray[~near] == 255).all()  # background and padding are white
+        assert (ref.gray[inner] == 0).all()    # the black object keeps its colour
+    # crop (0, 70)-(160, 230) scaled by 360 / 160 = 2.25: object x 112.5-247.5, y 67.5-292.5
+    ys, xs = np.nonzero(refs[0].mask)
+    assert abs(xs.min() - 112.5) <= 1 and abs(xs.max() + 1 - 247.5) <= 1
+    assert abs(ys.min() - 67.5) <= 1 and abs(ys.max() + 1 - 292.5) <= 1
+    # the 180 version is centred: offset 90, scale 1.125 -> x 146.25-213.75, y 123.75-236.25
+    ys, xs = np.nonzero(refs[1].mask)
+    assert abs(xs.min() - 146.25) <= 1 and abs(xs.max() + 1 - 213.75) <= 1
+    assert abs(ys.min() - 123.75) <= 1 and abs(ys.max() + 1 - 236.25) <= 1
+
+
+def test_reference_crop_leaving_the_view_is_padded_white():
+    view = rectangle_view(rows=(0, 100), cols=(0, 100))  # touches the top-left corner
+    ref = prepare_references([view], sides=(360,))[0]
+    # crop (-30, -30)-(130, 130): the object starts 30 / 160 * 360 = 67.5 px in, all else is white
+    ys, xs = np.nonzero(ref.mask)
+    assert abs(xs.min() - 67.5) <= 1 and abs(ys.min() - 67.5) <= 1
+    assert (ref.gray[:60, :] == 255).all() and (ref.gray[:, :60] == 255).all()
+
+
+@pytest.mark.parametrize("normalize", [superglue_normalize, lightglue_normalize])
+def test_reference_keypoints_moved_into_the_frame_keep_their_own_normalisation(normalize):
+    xy = torch.tensor([[0.0, 0.0], [359.0, 12.0], [180.0, 180.0], [33.0, 300.0]])
+    moved = to_frame_of(xy, (360, 360), (640, 360))
+    torch.testing.assert_close(normalize(moved[None], 640, 360), normalize(xy[None], 360, 360))
+
+
+# ---------------------------------------------------------------------------- the match rules
+def hand_made_pair():
+    """4 observation keypoints against 3 reference keypoints, as a matcher would output them.
+
+    obs 0 <-> ref 1 mutual, 0.9, ref 1 on the object      -> valid, on the object
+    obs 1: no match
+    obs 2 <-> ref 0 mutual, 0.5, ref 0 off the object     -> valid, off the object
+    obs 3 -> ref 2, but ref 2 -> obs 1 (not mutual), 0.8  -> invalid
+    """
+    matches0 = np.array([1, -1, 0, 2])
+    matches1 = np.array([2, 0, 1])
+    conf0 = np.array([0.9, 0.0, 0.5, 0.8])
+    ref_xy = np.array([[5.0, 5.0], [50.0, 40.0], [60.0, 60.0]])
+    mask = np.zeros((100, 100), bool)
+    mask[30:70, 30:70] = True
+    obs_xy = np.array([[10.0, 11.0], [20.0, 21.0], [30.0, 31.0], [40.0, 41.0]])
+    return matches0, matches1, conf0, ref_xy, mask, obs_xy
+
+
+def test_valid_matches_are_mutual_and_above_threshold():
+    matches0, matches1, conf0, ref_xy, mask, _ = hand_made_pair()
+    pair = valid_matches(matches0, matches1, conf0, ref_xy, mask, threshold=0.2)
+    np.testing.assert_array_equal(pair.obs_index, [0, 2])
+    np.testing.assert_allclose(pair.confidence, [0.9, 0.5])
+    np.testing.assert_array_equal(pair.on_object, [True, False])
+    strict = valid_matches(matches0, matches1, conf0, ref_xy, mask, threshold=0.5)  # "> 0.2" is strict
+    np.testing.assert_array_equal(strict.obs_index, [0])
+
+
+def test_valid_matches_ignore_indices_into_padding():
+    # reference has 2 real keypoints; obs 0 points at padded index 2 whose reverse entry happens to agree
+    pair = valid_matches(np.array([2, 1]), np.array([-1, 1, 0]), np.array([0.9, 0.9]),
+                         np.array([[1.0, 1.0], [2.0, 2.0]]), np.ones((4, 4), bool), threshold=0.2)
+    np.testing.assert_array_equal(pair.obs_index, [1])
+
+
+def test_superglue_score_sums_confidences_points_need_the_reference_keypoint_on_the_object():
+    matches0, matches1, conf0, ref_xy, mask, obs_xy = hand_made_pair()
+    pair = valid_matches(matches0, matches1, conf0, ref_xy, mask, threshold=0.2)
+    r = superglue_verdict([pair, pair], obs_xy)  # two references with the same matches
+    assert r.score == pytest.approx(2 * (0.9 + 0.5))
+    np.testing.assert_allclose(r.points, [[10.0, 11.0]])  # obs 0 only, once
+    assert r.point_scores is None  # every point carries the frame score: points_at(8.0) keeps or drops all
+    assert len(r.points_at(2.79)) == 1 and len(r.points_at(2.81)) == 0
+
+
+def test_count_verdict_counts_distinct_keypoints_on_the_object():
+    matches0, matches1, conf0, ref_xy, mask, obs_xy = hand_made_pair()
+    pair = valid_matches(matches0, matches1, conf0, ref_xy, mask, threshold=0.1)
+    other = valid_matches(np.array([-1, -1, -1, 0]), np.array([3]), np.array([0, 0, 0, 0.7]),
+                          np.array([[50.0, 50.0]]), mask, threshold=0.1)
+    r = count_verdict([pair, pair, other], obs_xy)
+    assert r.score == 2.0
+    np.testing.assert_allclose(r.points, [[10.0, 11.0], [40.0, 41.0]])
+
+
+# ---------------------------------------------------------------------------- IEVE composite
+def test_gated_count_counts_only_matches_inside_the_best_box():
+    points = np.array([[50, 50], [250, 250], [260, 260], [10, 400], [150, 150], [100, 20]], np.float32)
+    boxes = np.array([[0, 0, 200, 200], [200, 200, 300, 300]], np.float32)
+    scores = np.array([0.3, 0.9], np.float32)
+    r = gated_count(points, boxes, scores, gate_sigma=0.5, gate="g")
+    assert r.score == 2.0  # box 0 holds 3 matches, but the gate's best box is box 1
+    np.testing.assert_allclose(r.points, [[250, 250], [260, 260]])
+    np.testing.assert_allclose(r.boxes, boxes[1:])
+    np.testing.assert_allclose(r.box_scores, [0.9])
+    assert gated_count(points, boxes, np.array([0.95, 0.9]), 0.5, "g").score == 3.0
+    closed = gated_count(points, boxes, scores, gate_sigma=0.95, gate="g")
+    assert closed.score == 0.0 and len(closed.points) == 0
+    with pytest.raises(MatcherError, match="gate 'g' returns no boxes"):
+        gated_count(points, None, None, 0.5, "g")
+
+
+def stub_parts(seen: dict):
+    """A detector gate with a ``query`` option and a keypoint matcher, both returning hand-set results."""
+    from dataclasses import dataclass
+
+    @dataclass
+    class GateConfig(MatcherConfig):
+        query: str = "descriptions"
+
+    class Gate(Matcher):
+        name, Config, modality = "stub-gate", GateConfig, Modality.CATEGORY
+
+        def _prepare(self, target):
+            seen["gate"] = (self.cfg.query, target.category)
+
+        def _match_batch(self, images):
+            return [MatchResult(0.9, boxes=[[0, 0, 100, 100], [200, 200, 300, 300]], box_scores=[0.9, 0.4])
+                    for _ in images]
+
+    class Points(Matcher):
+        name, modality = "stub-points", Modality.VISUAL
+
+        def _prepare(self, target):
+            seen["points"] = target.category
+
+        def _match_batch(self, images):
+            return [MatchResult(4.0, points=[[10, 10], [90, 95], [250, 250], [150, 20]]) for _ in images]
+
+    return Gate, Points
+
+
+def test_ieve_composes_registered_parts_and_gives_the_gate_the_category(monkeypatch, target):
+    seen: dict = {}
+    gate, points = stub_parts(seen)
+    monkeypatch.setitem(registry._REGISTRY, "stub-gate", gate)
+    monkeypatch.setitem(registry._REGISTRY, "stub-points", points)
+    m = create_matcher("ieve", gate="stub-gate", keypoints="stub-points", gate_sigma=0.5)
+    assert m.modality is Modality.CATEGORY
+    m.prepare(target)
+    assert seen == {"gate": ("category", "mug"), "points": ""}  # the keypoint part never sees the label
+    r = m.match(np.zeros((360, 360, 3), np.uint8))
+    assert r.score == 2.0
+    np.testing.assert_allclose(r.points, [[10, 10], [90, 95]])
+
+
+def test_ieve_config_errors():
+    with pytest.raises(ConfigError, match="gate_weights"):
+        create_matcher("ieve", weights="/tmp")
+    with pytest.raises(ConfigError, match="itself"):
+        create_matcher("ieve", keypoints="ieve")
+    with pytest.raises(KeyError, match="unknown matcher"):
+        create_matcher("ieve", gate="no-such-detector")
+
+
+def test_ieve_default_parts_are_owl_by_category_and_lightglue(monkeypatch):
+    m = create_matcher("ieve")
+    assert (m.gate.display_name, m.gate.cfg.query, m.gate.modality) == ("owl", "category", Modality.CATEGORY)
+    assert m.keypoints.display_name == "lightglue"
+    before = m.id
+    monkeypatch.setattr(type(m.keypoints), "version", m.keypoints.version + 1)
+    assert m.id != before  # a part's new version renames the composite's caches
+
+
+# ---------------------------------------------------------------------------- tiny real models
+def test_construction_loads_nothing_and_offline_error_names_hub_id_and_override(target):
+    m = create_matcher("superglue")
+    with pytest.raises(OSError, match=r"magic-leap-community/superglue_indoor.*weights="):
+        m.prepare(target)
+    m = create_matcher("ieve")  # the composite's message names its own option for the failing part
+    with pytest.raises(OSError, match=r"part 'owl' \(set gate_weights=\).*google/owlvit-base-patch32"):
+        m.prepare(target)
+
+
+@pytest.mark.parametrize("name", ["superglue", "lightglue"])
+def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, lightglue_dir, target):
+    weights = superglue_dir if name == "superglue" else lightglue_dir
+    m = create_matcher(name, weights=weights, max_keypoints=48, nms_radius=3, match_threshold=0.0)
+    m.prepare(target)
+    assert len(m._refs) == 6
+    detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
+    assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, 48)
+    if name == "superglue":
+        assert m._model.config.sinkhorn_iterations == 20
+    rng = np.random.default_rng(0)
+    for shape in ((640, 360, 3), (203, 331, 3)):
+        frame = rng.integers(0, 256, shape, dtype=np.uint8)
+        r = m.match(frame)
+        assert r.score >= 0.0 and len(r.crop_scores) == 1
+    again = m.match(frame)  # SuperPoint on a full frame is slow on CPU: determinism on the small one
+    assert again.score == r.score
+    np.testing.assert_array_equal(again.points, r.points)
+
+
+def test_superglue_defaults_are_pins():
+    m = create_matcher("superglue")
+    assert m.default_sigma == 8.0
+    cfg = m.cfg
+    assert (cfg.nms_radius, cfg.keypoint_threshold, cfg.max_keypoints) == (4, 0.005, 1024)
+    assert (cfg.sinkhorn_iterations, cfg.match_threshold, cfg.crops) == (20, 0.2, "whole")
