@@ -1,0 +1,76 @@
+"""Synthetic generator throughput: frames per second per core, reference renders, scaling 1 vs 2 workers.
+
+Run directly (``python benchmarks/bench_synth.py [--quick]``) or through ``run(quick)``.
+Timings are wall-clock on this machine; the generator's output is identical for both worker
+counts (checked here by fingerprint), so the comparison is like for like.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import tempfile
+import time
+from pathlib import Path
+
+
+def _time_frames(n: int) -> float:
+    """Seconds per rendered episode frame (render + mask + camera effects + encoding), one process."""
+    from pin_match.synth.generate import EpisodePlan, plan_episodes, render_episode
+    from pin_match.synth.objects import make_objects, stable_seed
+
+    specs = make_objects(0, 4)
+    episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]
+    roles = ("target",) + tuple("same_category" if o.category == objs[0].category else "other" for o in objs[1:])
+    with tempfile.TemporaryDirectory() as tmp:
+        plan = EpisodePlan(episode_id, split, scene_id, stable_seed(0, "scene", scene_id),
+                           stable_seed(0, "episode", episode_id), tuple(objs), roles, n, tmp)
+        render_episode(plan)  # warm-up: first pybullet connection
+        t0 = time.perf_counter()
+        render_episode(plan)
+        return (time.perf_counter() - t0) / n
+
+
+def _time_references(n: int) -> float:
+    from pin_match.synth.generate import render_object
+    from pin_match.synth.objects import make_objects
+
+    specs = make_objects(0, 2)[::2][:n]
+    render_object(specs[0])
+    t0 = time.perf_counter()
+    for s in specs:
+        render_object(s)
+    return (time.perf_counter() - t0) / len(specs)
+
+
+def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:
+    from pin_match.synth import generate
+
+    with tempfile.TemporaryDirectory() as tmp:
+        t0 = time.perf_counter()
+        fs = generate(Path(tmp) / "fs", workers=workers, **settings)
+        return time.perf_counter() - t0, fs.fingerprint, len(fs.frames)
+
+
+def run(quick: bool) -> dict:
+    """Measure and print; returns the numbers (seconds, frames/s) for a common runner."""
+    settings = (dict(episodes=4, objects_per_category=4, frames_per_episode=8) if quick
+                else dict(episodes=8, objects_per_category=4, frames_per_episode=32))
+    per_frame = _time_frames(8 if quick else 32)
+    per_object = _time_references(4 if quick else 12)
+    t1, fp1, n_frames = _time_generate(1, settings)
+    t2, fp2, _ = _time_generate(2, settings)
+    result = dict(
+        frame_ms_one_core=round(per_frame * 1000, 1), frames_per_s_per_core=round(1 / per_frame, 2),
+        reference_object_ms_one_core=round(per_object * 1000, 1), generate_settings=settings, frames=n_frames,
+        generate_s_1_worker=round(t1, 1), generate_s_2_workers=round(t2, 1), speedup_2_workers=round(t1 / t2, 2),
+        identical_output=fp1 == fp2,
+    )
+    print(json.dumps(result, indent=2))
+    return result
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    run(ap.parse_args().quick)

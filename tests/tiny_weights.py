@@ -1,0 +1,140 @@
+"""Tiny random checkpoints, saved with each library's own save function, for every model-backed matcher.
+
+One place builds them so the family tests and the contract test load the same files
+through the matchers' real ``weights=`` path. Sizes obey each config's consistency rules
+(see ../shared/ENVIRONMENT.md) and keep a forward pass in milliseconds.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import torch
+
+TINY_CLIP = "pin-match-test-tiny-clip"
+TINY_SUPERPOINT = dict(encoder_hidden_sizes=[8, 8, 16, 16], decoder_hidden_size=16, descriptor_decoder_dim=32)
+SAM_SIZE, SAM_PATCH = 256, 16  # a 16x16 feature grid, 64x64 low-resolution masks
+
+
+def save_tiny_timm_vit(path: Path) -> Path:
+    """timm's ``test_vit`` saved as a hub-style folder (config.json + model.safetensors)."""
+    import timm
+    from timm.models import save_for_hf
+
+    torch.manual_seed(0)
+    save_for_hf(timm.create_model("test_vit", pretrained=False), str(path), safe_serialization=True)
+    return path
+
+
+def register_tiny_open_clip(folder: Path) -> str:
+    """A 1-layer open_clip ViT config registered under ``TINY_CLIP`` (open_clip looks configs up by name)."""
+    import open_clip
+
+    config = dict(embed_dim=16, vision_cfg=dict(image_size=32, layers=1, width=32, head_width=16, patch_size=8),
+                  text_cfg=dict(context_length=77, vocab_size=49408, width=32, heads=2, layers=1))
+    folder.mkdir(parents=True, exist_ok=True)
+    (folder / f"{TINY_CLIP}.json").write_text(json.dumps(config))
+    open_clip.add_model_config(folder / f"{TINY_CLIP}.json")
+    return TINY_CLIP
+
+
+def save_tiny_open_clip(path: Path) -> dict:
+    """The tiny open_clip model as .pt and .safetensors; returns the paths and the state dict."""
+    import open_clip
+    from safetensors.torch import save_file
+
+    path.mkdir(parents=True, exist_ok=True)
+    register_tiny_open_clip(path)
+    torch.manual_seed(0)
+    clip = open_clip.create_model(TINY_CLIP, force_quick_gelu=True)
+    torch.save(clip.state_dict(), path / "clip.pt")
+    save_file(clip.state_dict(), str(path / "clip.safetensors"))
+    return dict(pt=path / "clip.pt", safetensors=path / "clip.safetensors", state_dict=clip.state_dict())
+
+
+def save_tiny_superglue(path: Path) -> str:
+    import transformers
+
+    torch.manual_seed(0)
+    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
+                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"],
+                                          num_attention_heads=2)
+    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
+    return str(path)
+
+
+def save_tiny_lightglue(path: Path) -> str:
+    import transformers
+
+    torch.manual_seed(0)
+    config = transformers.LightGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, descriptor_dim=32,
+                                          num_hidden_layers=2, num_attention_heads=2)
+    transformers.LightGlueForKeypointMatching(config).save_pretrained(path)
+    return str(path)
+
+
+def save_tiny_owl(path: Path) -> str:
+    import transformers
+
+    torch.manual_seed(0)
+    text = dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2,
+                max_position_embeddings=16)
+    vision = dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2, image_size=64,
+                  patch_size=16)
+    config = transformers.OwlViTConfig(text_config=text, vision_config=vision, projection_dim=32)
+    transformers.OwlViTForObjectDetection(config).save_pretrained(path)
+    return str(path)
+
+
+def save_tiny_hf_clip(path: Path) -> str:
+    """A random transformers CLIP with B/32's geometry (224 input, 7x7 patches) and open_clip's vocabulary."""
+    from transformers import CLIPConfig, CLIPModel
+
+    torch.manual_seed(0)
+    cfg = CLIPConfig(
+        text_config=dict(vocab_size=49408, hidden_size=32, intermediate_size=64, num_hidden_layers=2,
+                         num_attention_heads=2, max_position_embeddings=77),
+        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2,
+                           image_size=224, patch_size=32),
+        projection_dim=16)
+    CLIPModel(cfg).save_pretrained(path)
+    return str(path)
+
+
+def save_tiny_sam(path: Path) -> str:
+    from transformers import SamConfig, SamModel
+
+    torch.manual_seed(0)
+    c = 32
+    cfg = SamConfig(
+        vision_config=dict(hidden_size=32, output_channels=c, num_hidden_layers=2, num_attention_heads=2,
+                           image_size=SAM_SIZE, patch_size=SAM_PATCH, window_size=4, global_attn_indexes=[1],
+                           num_pos_feats=c // 2, mlp_dim=64, initializer_range=0.02),
+        prompt_encoder_config=dict(hidden_size=c, image_size=SAM_SIZE, patch_size=SAM_PATCH,
+                                   image_embedding_size=SAM_SIZE // SAM_PATCH),
+        mask_decoder_config=dict(hidden_size=c, mlp_dim=64, num_attention_heads=2, iou_head_hidden_dim=c))
+    SamModel(cfg).save_pretrained(path)
+    return str(path)
+
+
+def tiny_overrides(root: Path) -> dict[str, dict]:
+    """Config overrides that make every built-in matcher load tiny local weights (or none)."""
+    timm_dir = save_tiny_timm_vit(root / "timm")
+    clip = save_tiny_open_clip(root / "open_clip")
+    owl = save_tiny_owl(root / "owl")
+    lightglue = save_tiny_lightglue(root / "lightglue")
+    return {
+        "sift": {}, "color": {},
+        "dino": dict(model_name="test_vit", img_size=64, weights=str(timm_dir)),
+        "dinov2": dict(model_name="test_vit", img_size=48, weights=str(timm_dir / "model.safetensors")),
+        "clip": dict(model_name=TINY_CLIP, img_size=32, weights=str(clip["pt"])),
+        "clip-text": dict(model_name=TINY_CLIP, img_size=32, weights=str(clip["safetensors"])),
+        "clip-grad": dict(weights=save_tiny_hf_clip(root / "hf_clip")),
+        "owl": dict(weights=owl), "owl-image": dict(weights=owl),
+        "superglue": dict(weights=save_tiny_superglue(root / "superglue"), max_keypoints=48),
+        "lightglue": dict(weights=lightglue, max_keypoints=48),
+        "ieve": dict(gate_weights=owl, keypoints_weights=lightglue),
+        "persam": dict(weights=save_tiny_sam(root / "sam")),
+        "persam-f": dict(weights=str(root / "sam"), iterations=3),
+    }
