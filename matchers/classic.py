@@ -164,6 +164,12 @@ class ColorMatcher(CropMatcher):
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
         return [self._match_crop(c) for c in crops]
 
+    def embed_reference(self, view: np.ndarray) -> np.ndarray:
+        """The L2-normalised colour histogram of the object's pixels: what this matcher compares."""
+        rgb, alpha = object_pixels(view)
+        hist = self._hist(self._bins(rgb)[alpha]).astype(np.float32)
+        return hist / max(float(np.linalg.norm(hist)), 1e-12)
+
     def _match_crop(self, crop: np.ndarray) -> MatchResult:
         c = self.cfg
         h, w = crop.shape[:2]
