@@ -40,8 +40,8 @@ def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | P
             sigma, source = tuned["sigma"], f"tuned on train ({objective})"
         except TuningError as exc:  # e.g. a val-only recording: fall back to the matcher's default, and say so
             sigma, source = table.meta["default_sigma"], f"matcher default ({exc})"
-        result = report(table, fs, out / "reports" / name, sigma=sigma, split="val", n_boot=n_boot)
-        result["sigma_source"] = source
+        result = report(table, fs, out / "reports" / name, sigma=sigma, split="val", n_boot=n_boot,
+                        sigma_source=source)
         results.append(result)
     joint = side_by_side(results)
     atomic.write_text(out / "table.md", markdown_table(joint) + "\n")

@@ -82,11 +82,11 @@ def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:
 
 def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float | None = None,
            thresholds: str | Path | None = None, split: str | None = "val", n_boot: int = 1000,
-           seed: int = 0) -> dict:
+           seed: int = 0, sigma_source: str | None = None) -> dict:
     """Evaluate at one sigma and write the report folder; returns metrics.json's content plus ``files``."""
     sigma, source = resolve_sigma(table, sigma, thresholds)
     result, categories, scored = evaluate(table, fs, sigma, split, n_boot=n_boot, seed=seed)
-    result["sigma_source"] = source
+    result["sigma_source"] = sigma_source or source
     out = Path(out_dir)
     files = [out / name for name in ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex",
                                      "sigma_curves.png", "score_distributions.png", "per_category.png")]

@@ -1,0 +1,84 @@
+"""The analysis notebooks (issue 7) run headlessly on a small synthetic bench and render figures.
+
+Executed copies go to pytest's tmp folder only: the notebooks in git keep no outputs.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pin_match.analysis import AnalysisError, load_bench
+from pin_match.bench import bench
+from pin_match.synth import generate
+
+REPO = Path(__file__).resolve().parents[1]
+NOTEBOOKS = sorted((REPO / "notebooks").glob("[0-9][0-9]_*.ipynb"))
+NAMES = ["01_benchmark_overview", "02_threshold_tuning", "03_similarity", "04_error_gallery"]
+MATCHERS = ["sift", "color"]
+
+
+@pytest.fixture(scope="module")
+def bench_run(tmp_path_factory):
+    """A demo-shaped folder: run/frameset (synthetic) plus bench's scores, thresholds and reports."""
+    run = tmp_path_factory.mktemp("nb") / "run"
+    generate(run / "frameset", seed=1, episodes=4, objects_per_category=4, frames_per_episode=8, workers=1)
+    bench(run / "frameset", MATCHERS, run, n_boot=50, workers=1, progress=False)
+    return run
+
+
+def test_every_notebook_is_shipped_without_outputs():
+    assert [p.stem for p in NOTEBOOKS] == NAMES
+    for path in NOTEBOOKS:
+        nb = json.loads(path.read_text(encoding="utf-8"))
+        code = [c for c in nb["cells"] if c["cell_type"] == "code"]
+        assert "parameters" in code[0].get("metadata", {}).get("tags", []), path.name
+        for cell in code:
+            assert cell["outputs"] == [] and cell["execution_count"] is None, path.name
+
+
+def test_load_bench(bench_run):
+    run = load_bench(bench_run)
+    assert sorted(run.matchers) == sorted(MATCHERS)
+    for name in MATCHERS:
+        assert run.sigmas[name] == run.reports[name]["sigma"] == run.tuned[name]["sigma"]
+        assert run.tables[name].meta["frameset_fingerprint"] == run.frameset.fingerprint
+        val = run.scored(name, "val")
+        assert set(val.split) == {"val"} and len(run.scored(name)) == len(run.frameset.frames)
+    assert list(run.table().columns[:5]) == ["sigma", "%Match", "TM", "CM", "NM"]
+
+
+def test_load_bench_errors(bench_run, tmp_path):
+    with pytest.raises(AnalysisError, match="no reports"):
+        load_bench(tmp_path, bench_run / "frameset")
+    other = generate(tmp_path / "other", seed=2, episodes=2, objects_per_category=2, frames_per_episode=2,
+                     workers=1)
+    with pytest.raises(AnalysisError, match="reports frame-set"):
+        load_bench(bench_run, other)
+    copy = tmp_path / "copy"
+    shutil.copytree(bench_run / "reports", copy / "reports")
+    with pytest.raises(AnalysisError, match="no score table"):
+        load_bench(copy, bench_run / "frameset")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_notebook_runs(name, bench_run, tmp_path, monkeypatch):
+    nbformat = pytest.importorskip("nbformat")
+    nbclient = pytest.importorskip("nbclient")
+    monkeypatch.setenv("PIN_MATCH_RUN_DIR", str(bench_run))
+    monkeypatch.delenv("PIN_MATCH_FRAMESET", raising=False)  # default: RUN_DIR/frameset
+    monkeypatch.setenv("MPLBACKEND", "Agg")  # the notebooks switch to the inline backend themselves
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    nb = nbformat.read(REPO / "notebooks" / f"{name}.ipynb", as_version=4)
+    client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
+                                     resources={"metadata": {"path": str(REPO)}})
+    try:
+        client.execute()  # raises CellExecutionError on any cell error
+    finally:
+        nbformat.write(nb, tmp_path / f"{name}.executed.ipynb")  # for inspection, never into notebooks/
+    outputs = [o for c in nb.cells if c.cell_type == "code" for o in c.get("outputs", [])]
+    assert not [o for o in outputs if o.get("output_type") == "error"]
+    assert any("image/png" in o.get("data", {}) for o in outputs), f"{name} rendered no figure"
