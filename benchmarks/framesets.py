@@ -13,9 +13,15 @@ CACHE = Path("pin_match_runs") / "benchmarks"
 
 
 def synthetic(episodes: int, name: str) -> FrameSet:
-    """A cached synthetic frame-set with ``episodes`` episodes (generated on first use)."""
-    from pin_match.synth import generate
+    """A cached synthetic frame-set with ``episodes`` episodes (generated on first use).
 
+    The default size is the demo's own frame-set, reused when ``pin-match demo`` made it.
+    """
+    from pin_match.bench import DEMO_OUT
+    from pin_match.synth import DEFAULTS, generate
+
+    if episodes == DEFAULTS["episodes"] and (DEMO_OUT / "frameset" / "frameset.json").exists():
+        return FrameSet.load(DEMO_OUT / "frameset")
     root = CACHE / name
     if (root / "frameset.json").exists():
         return FrameSet.load(root)
