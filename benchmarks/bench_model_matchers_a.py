@@ -10,14 +10,13 @@ hits the 1024-keypoint cap: the keypoint figures are the worst case of PIN's set
 from __future__ import annotations
 
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from benchmarks.timing import time_matchers
 from pin_match.frameset import Target
-from pin_match.registry import create_matcher
 
 
 def _target() -> Target:
@@ -56,7 +55,6 @@ def run(quick: bool) -> dict:
     rng = np.random.default_rng(0)
     images = [rng.integers(0, 256, (640, 360, 3), dtype=np.uint8) for _ in range(frames + 1)]
     target = _target()
-    out = {}
     with tempfile.TemporaryDirectory() as tmp:
         paths = {k: str(v) for k, v in _save_models(Path(tmp)).items()}
         options = {
@@ -66,22 +64,7 @@ def run(quick: bool) -> dict:
             "owl": {"weights": paths["owl"]},
             "owl-image": {"weights": paths["owl"]},
         }
-        for name, kwargs in options.items():
-            matcher = create_matcher(name, **kwargs)
-            start = time.perf_counter()
-            matcher.prepare(target)
-            prepare_s = time.perf_counter() - start
-            matcher.match(images[0])
-            start = time.perf_counter()
-            for image in images[1:]:
-                matcher.match(image)
-            ms = 1000 * (time.perf_counter() - start) / frames
-            out[name] = {"ms_per_frame": round(ms, 1), "prepare_s": round(prepare_s, 2), "frames": frames,
-                         "threads": torch.get_num_threads()}
-    print(f"{'matcher':<10} {'ms/frame':>10} {'prepare s':>10} {'frames':>7}")
-    for name, row in out.items():
-        print(f"{name:<10} {row['ms_per_frame']:>10.1f} {row['prepare_s']:>10.2f} {row['frames']:>7}")
-    return out
+        return time_matchers(options, target, images)
 
 
 if __name__ == "__main__":

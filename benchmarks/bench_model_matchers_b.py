@@ -8,14 +8,13 @@ saved with save_pretrained and loaded through ``weights=`` like any local overri
 from __future__ import annotations
 
 import tempfile
-import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from benchmarks.timing import time_matchers
 from pin_match.frameset import Target
-from pin_match.registry import create_matcher
 
 
 def _target() -> Target:
@@ -42,25 +41,11 @@ def run(quick: bool) -> dict:
     rng = np.random.default_rng(0)
     images = [rng.integers(0, 256, (640, 360, 3), dtype=np.uint8) for _ in range(frames + 1)]
     target = _target()
-    out = {}
     with tempfile.TemporaryDirectory() as tmp:
         paths = _save_models(Path(tmp))
-        for name, model in (("clip-grad", "clip"), ("persam", "sam"), ("persam-f", "sam")):
-            matcher = create_matcher(name, weights=str(paths[model]))
-            start = time.perf_counter()
-            matcher.prepare(target)
-            prepare_s = time.perf_counter() - start
-            matcher.match(images[0])
-            start = time.perf_counter()
-            for image in images[1:]:
-                matcher.match(image)
-            ms = 1000 * (time.perf_counter() - start) / frames
-            out[name] = {"ms_per_frame": round(ms, 1), "prepare_s": round(prepare_s, 2), "frames": frames,
-                         "threads": torch.get_num_threads()}
-    print(f"{'matcher':<10} {'ms/frame':>10} {'prepare s':>10} {'frames':>7}")
-    for name, row in out.items():
-        print(f"{name:<10} {row['ms_per_frame']:>10.1f} {row['prepare_s']:>10.2f} {row['frames']:>7}")
-    return out
+        options = {name: {"weights": str(paths[model])}
+                   for name, model in (("clip-grad", "clip"), ("persam", "sam"), ("persam-f", "sam"))}
+        return time_matchers(options, target, images)
 
 
 if __name__ == "__main__":

@@ -15,10 +15,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
 from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatchResult, Modality
 from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.weights import WeightsSpec
 
 WEIGHTS = WeightsSpec("openai/clip-vit-base-patch32", license="MIT")
 RELEVANCE_SCALE = 10.0  # CoW multiplies the relevance by 10 before thresholding
@@ -65,19 +66,6 @@ class ClipGradConfig(MatcherConfig):
             raise ConfigError(f"clip-grad: point_stride must be >= 1, got {self.point_stride}")
 
 
-def load_clip(override: str | None):
-    """CLIPModel from ``weights=`` (a save_pretrained folder) or the hub cache; never downloads silently."""
-    from transformers import CLIPModel
-
-    path = WEIGHTS.local_path(override)
-    source = str(path) if path is not None else WEIGHTS.hub_id
-    try:
-        return CLIPModel.from_pretrained(source).eval()
-    except OSError as exc:
-        raise WeightsError(f"clip-grad: cannot load CLIP weights from {source!r} (hub id {WEIGHTS.hub_id}; "
-                           f"offline, pass weights=<save_pretrained folder>): {exc}") from exc
-
-
 @register_matcher("clip-grad")
 class ClipGradMatcher(CropMatcher):
     """Score = 10 x max gradient relevance over patches; points = relevance pixels, each with its value."""
@@ -98,7 +86,8 @@ class ClipGradMatcher(CropMatcher):
     # ------------------------------------------------------------------ target
     def _prepare(self, target: Target) -> None:
         if self._model is None:
-            self._model = load_clip(self.cfg.weights).to(self.cfg.device)
+            self._model = load_pretrained(WEIGHTS, self.cfg.weights, f"matcher {self.display_name}",
+                                          _load_clipmodel).to(self.cfg.device)
             self._model.requires_grad_(False)  # only the attention probabilities need a gradient
         if target.descriptions not in self._cache:  # episodes share targets: encode each once
             self._cache[target.descriptions] = self._encode_descriptions(target.descriptions)
@@ -186,3 +175,10 @@ class ClipGradMatcher(CropMatcher):
             results.append(MatchResult(score=float(rmap.max()), points=np.stack([gx.ravel(), gy.ravel()], 1),
                                        point_scores=values.ravel(), heatmap=rmap.detach().cpu().numpy()))
         return results
+
+
+def _load_clipmodel(source: str):
+    """The eval-mode model from a hub id or a save_pretrained folder (through ``load_pretrained``)."""
+    from transformers import CLIPModel
+
+    return CLIPModel.from_pretrained(source).eval()

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.weights import WeightsError, WeightsSpec, misfit
 
 T = TypeVar("T")
 
@@ -21,6 +21,10 @@ def load_pretrained(spec: WeightsSpec, override: str | None, who: str, load: Cal
     source = str(local) if local is not None else spec.hub_id
     try:
         return load(source)
+    except (RuntimeError, ValueError) as exc:
+        if local is None:
+            raise
+        raise misfit(who, local, spec.hub_id, exc) from exc
     except OSError as exc:
         if local is not None:
             raise WeightsError(f"{who}: cannot load the checkpoint folder {local} ({exc})") from exc

@@ -32,10 +32,11 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
 from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatchResult, Modality
 from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.weights import WeightsSpec
 
 WEIGHTS = WeightsSpec("facebook/sam-vit-base", license="Apache-2.0")
 PAPER = "Personalize Segment Anything Model with One Shot (Zhang et al., ICLR 2024)"
@@ -61,19 +62,6 @@ class PerSamFConfig(PerSamConfig):
         super().__post_init__()
         if self.iterations < 0 or self.lr <= 0:
             raise ConfigError(f"persam-f: need iterations >= 0 and lr > 0, got {self.iterations}, {self.lr}")
-
-
-def load_sam(override: str | None):
-    """SamModel from ``weights=`` (a save_pretrained folder) or the hub cache; never downloads silently."""
-    from transformers import SamModel
-
-    path = WEIGHTS.local_path(override)
-    source = str(path) if path is not None else WEIGHTS.hub_id
-    try:
-        return SamModel.from_pretrained(source).eval()
-    except OSError as exc:
-        raise WeightsError(f"persam: cannot load SAM weights from {source!r} (hub id {WEIGHTS.hub_id}; "
-                           f"offline, pass weights=<save_pretrained folder>): {exc}") from exc
 
 
 def dice_loss(logits: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
@@ -137,7 +125,8 @@ class PerSamMatcher(CropMatcher):
         if self._model is None:
             from transformers import SamImageProcessor
 
-            self._model = load_sam(self.cfg.weights).to(self.cfg.device)
+            self._model = load_pretrained(WEIGHTS, self.cfg.weights, f"matcher {self.display_name}",
+                                          _load_sammodel).to(self.cfg.device)
             self._model.requires_grad_(False)
             size = self._model.config.vision_config.image_size
             self._processor = SamImageProcessor(size={"longest_edge": size}, pad_size={"height": size, "width": size})
@@ -313,3 +302,10 @@ class PerSamFMatcher(PerSamMatcher):
         """PerSAM-F: the three multimask logits mixed with the best reference's learnt weights."""
         logits, _ = self._decode(feats, points, multimask=True)
         return (self._mix[best][:, :, None, None] * logits).sum(dim=1)
+
+
+def _load_sammodel(source: str):
+    """The eval-mode model from a hub id or a save_pretrained folder (through ``load_pretrained``)."""
+    from transformers import SamModel
+
+    return SamModel.from_pretrained(source).eval()

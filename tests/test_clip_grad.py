@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from tiny_weights import save_tiny_hf_clip
 
 from conftest import make_view
 from matchers.clip_grad import WEIGHTS, ClipGradMatcher, centroid_at, relevance
@@ -18,19 +19,7 @@ from pin_match.weights import WeightsError
 
 @pytest.fixture(scope="module")
 def tiny_clip(tmp_path_factory):
-    """A random CLIP with B/32's geometry (224 input, 7x7 patches) and open_clip's vocabulary, saved to disk."""
-    from transformers import CLIPConfig, CLIPModel
-
-    torch.manual_seed(0)
-    cfg = CLIPConfig(
-        text_config=dict(vocab_size=49408, hidden_size=32, intermediate_size=64, num_hidden_layers=2,
-                         num_attention_heads=2, max_position_embeddings=77),
-        vision_config=dict(hidden_size=32, intermediate_size=64, num_hidden_layers=2, num_attention_heads=2,
-                           image_size=224, patch_size=32),
-        projection_dim=16)
-    path = tmp_path_factory.mktemp("clip") / "tiny"
-    CLIPModel(cfg).save_pretrained(path)
-    return str(path)
+    return save_tiny_hf_clip(tmp_path_factory.mktemp("clip") / "tiny")
 
 
 @pytest.fixture(scope="module")

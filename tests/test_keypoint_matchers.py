@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-import transformers
+from tiny_weights import save_tiny_lightglue, save_tiny_superglue
 from transformers.models.lightglue.modeling_lightglue import normalize_keypoints as lightglue_normalize
 from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
 
@@ -26,28 +26,15 @@ from pin_match.frameset import Target
 from pin_match.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
 from pin_match.registry import create_matcher
 
-TINY_SUPERPOINT = dict(encoder_hidden_sizes=[8, 8, 16, 16], decoder_hidden_size=16, descriptor_decoder_dim=32)
-
 
 @pytest.fixture(scope="module")
 def superglue_dir(tmp_path_factory):
-    torch.manual_seed(0)
-    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
-                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"],
-                                          num_attention_heads=2)
-    path = tmp_path_factory.mktemp("superglue")
-    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
-    return str(path)
+    return save_tiny_superglue(tmp_path_factory.mktemp("superglue"))
 
 
 @pytest.fixture(scope="module")
 def lightglue_dir(tmp_path_factory):
-    torch.manual_seed(0)
-    config = transformers.LightGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, descriptor_dim=32,
-                                          num_hidden_layers=2, num_attention_heads=2)
-    path = tmp_path_factory.mktemp("lightglue")
-    transformers.LightGlueForKeypointMatching(config).save_pretrained(path)
-    return str(path)
+    return save_tiny_lightglue(tmp_path_factory.mktemp("lightglue"))
 
 
 @pytest.fixture(scope="module")

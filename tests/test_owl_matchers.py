@@ -4,26 +4,13 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
-import transformers
+from tiny_weights import save_tiny_owl
 
 from conftest import make_view
 from matchers.owl import clip_tokenizer, closest_reference, owl_verdict
 from pin_match.frameset import Target
 from pin_match.matcher import ConfigError, MatcherError, Modality
 from pin_match.registry import create_matcher
-
-
-def save_tiny_owl(path) -> str:
-    """A random OWL-ViT small enough for CPU tests, saved the way a real checkpoint is."""
-    torch.manual_seed(0)
-    text = dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2,
-                max_position_embeddings=16)
-    vision = dict(hidden_size=32, intermediate_size=64, num_hidden_layers=1, num_attention_heads=2, image_size=64,
-                  patch_size=16)
-    config = transformers.OwlViTConfig(text_config=text, vision_config=vision, projection_dim=32)
-    transformers.OwlViTForObjectDetection(config).save_pretrained(path)
-    return str(path)
 
 
 @pytest.fixture(scope="module")

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import torch
+from tiny_weights import TINY_CLIP, save_tiny_open_clip, save_tiny_timm_vit
 
 from matchers.backbones import PatchFeatures
 from matchers.patch import (
@@ -231,31 +232,16 @@ def test_construction_loads_nothing_and_prepare_offline_names_the_hub_id(monkeyp
 # ------------------------------------------------------------------------------ real loading, tiny checkpoints
 
 
-TINY_CLIP = "pin-match-test-tiny-clip"
-
-
 @pytest.fixture(scope="module")
 def checkpoints(tmp_path_factory):
     """Random tiny checkpoints written with the libraries' own savers."""
-    import open_clip
-    import timm
-    from safetensors.torch import save_file
-    from timm.models import save_for_hf
+    from safetensors.torch import load_file
 
     root = tmp_path_factory.mktemp("patch_ckpt")
-    torch.manual_seed(0)
-    vit = timm.create_model("test_vit", pretrained=False)
-    save_for_hf(vit, str(root / "timm"), safe_serialization=True)
-
-    config = dict(embed_dim=16, vision_cfg=dict(image_size=32, layers=1, width=32, head_width=16, patch_size=8),
-                  text_cfg=dict(context_length=77, vocab_size=49408, width=32, heads=2, layers=1))
-    (root / f"{TINY_CLIP}.json").write_text(json.dumps(config))
-    open_clip.add_model_config(root / f"{TINY_CLIP}.json")
-    clip = open_clip.create_model(TINY_CLIP, force_quick_gelu=True)
-    torch.save(clip.state_dict(), root / "clip.pt")
-    save_file(clip.state_dict(), str(root / "clip.safetensors"))
-    return dict(timm_dir=root / "timm", vit=vit.state_dict(), clip_pt=root / "clip.pt",
-                clip_st=root / "clip.safetensors", clip=clip.state_dict())
+    timm_dir = save_tiny_timm_vit(root / "timm")
+    clip = save_tiny_open_clip(root / "open_clip")
+    return dict(timm_dir=timm_dir, vit=load_file(str(timm_dir / "model.safetensors")), clip_pt=clip["pt"],
+                clip_st=clip["safetensors"], clip=clip["state_dict"])
 
 
 def tiny_config(name: str, ck) -> dict:

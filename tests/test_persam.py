@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 import torch.nn.functional as F
+from tiny_weights import SAM_PATCH, SAM_SIZE, save_tiny_sam
 
 from conftest import make_view
 from matchers.persam import WEIGHTS, PerSamFMatcher, PerSamMatcher, dice_loss, fit_mask_weights, focal_loss
@@ -16,26 +17,12 @@ from pin_match.frameset import Target
 from pin_match.registry import create_matcher, get_matcher_class
 from pin_match.weights import WeightsError
 
-SIZE, PATCH = 256, 16  # tiny SAM input and patch: a 16x16 feature grid, 64x64 low-resolution masks
+SIZE, PATCH = SAM_SIZE, SAM_PATCH
 
 
 @pytest.fixture(scope="module")
 def tiny_sam(tmp_path_factory):
-    """A random SAM whose sizes obey SamConfig's consistency rules, saved with save_pretrained."""
-    from transformers import SamConfig, SamModel
-
-    torch.manual_seed(0)
-    c = 32
-    cfg = SamConfig(
-        vision_config=dict(hidden_size=32, output_channels=c, num_hidden_layers=2, num_attention_heads=2,
-                           image_size=SIZE, patch_size=PATCH, window_size=4, global_attn_indexes=[1],
-                           num_pos_feats=c // 2, mlp_dim=64, initializer_range=0.02),
-        prompt_encoder_config=dict(hidden_size=c, image_size=SIZE, patch_size=PATCH,
-                                   image_embedding_size=SIZE // PATCH),
-        mask_decoder_config=dict(hidden_size=c, mlp_dim=64, num_attention_heads=2, iou_head_hidden_dim=c))
-    path = tmp_path_factory.mktemp("sam") / "tiny"
-    SamModel(cfg).save_pretrained(path)
-    return str(path)
+    return save_tiny_sam(tmp_path_factory.mktemp("sam") / "tiny")
 
 
 @pytest.fixture(scope="module")
