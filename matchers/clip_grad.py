@@ -73,7 +73,7 @@ class ClipGradMatcher(CropMatcher):
     Config = ClipGradConfig
     modality = Modality.TEXTUAL
     default_sigma = 0.85
-    hub_id = WEIGHTS.hub_id
+    weights_spec = WEIGHTS
     license = WEIGHTS.license
     paper = "CLIP on Wheels (Gadre et al., CVPR 2023), relevance after Chefer et al. (ICCV 2021)"
 

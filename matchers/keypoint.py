@@ -286,7 +286,6 @@ class SuperGlueMatcher(GlueMatcher):
     modality = Modality.VISUAL
     default_sigma = 8.0
     weights_spec = SUPERGLUE_WEIGHTS
-    hub_id = SUPERGLUE_WEIGHTS.hub_id
     license = SUPERGLUE_WEIGHTS.license
     paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
 
@@ -321,7 +320,6 @@ class LightGlueMatcher(GlueMatcher):
     modality = Modality.VISUAL
     default_sigma = 100.0  # IEVE's "confirmed" match count
     weights_spec = LIGHTGLUE_WEIGHTS
-    hub_id = LIGHTGLUE_WEIGHTS.hub_id
     license = LIGHTGLUE_WEIGHTS.license
     paper = "Lindenberger et al., LightGlue: Local Feature Matching at Light Speed, ICCV 2023"
 

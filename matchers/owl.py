@@ -87,7 +87,6 @@ class OwlBase(CropMatcher):
 
     default_sigma = 0.25  # PIN paper (its config file uses 0.2)
     weights_spec = WEIGHTS
-    hub_id = WEIGHTS.hub_id
     license = WEIGHTS.license
     paper = PAPER
 

@@ -107,7 +107,7 @@ class PerSamMatcher(CropMatcher):
     Config = PerSamConfig
     modality = Modality.VISUAL
     default_sigma = 0.925
-    hub_id = WEIGHTS.hub_id
+    weights_spec = WEIGHTS
     license = WEIGHTS.license
     paper = PAPER
     _fine_tunes = False  # PerSAM-F learns mask weights per reference in prepare

@@ -15,9 +15,9 @@ def matcher_catalog(pattern: str = "*") -> pd.DataFrame:
         except ImportError as exc:  # a plug-in whose dependencies are missing is listed, not fatal
             rows.append(dict(name=name, modality="?", default_sigma=None, weights=f"cannot import: {exc}"))
             continue
-        spec = getattr(cls, "weights_spec", None)
+        spec = cls.weights_spec
         if spec is None:
-            weights = "none needed"
+            weights = "none (weight-free, or a composite: see its parts)"
         else:
             weights = "cached locally" if spec.available() else f"not local (hub: {spec.hub_id}; pass weights=)"
         rows.append(dict(name=name, modality=cls.modality.value, default_sigma=cls.default_sigma, weights=weights))

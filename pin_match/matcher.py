@@ -22,6 +22,7 @@ import numpy as np
 
 from pin_match.crops import POLICIES, Crop, crop_boxes
 from pin_match.frameset import Target
+from pin_match.weights import WeightsSpec
 
 
 class Modality(str, Enum):
@@ -105,7 +106,7 @@ class Matcher(ABC):
     Config: ClassVar[type[MatcherConfig]] = MatcherConfig
     modality: ClassVar[Modality] = Modality.VISUAL
     default_sigma: ClassVar[float] = 0.5
-    hub_id: ClassVar[str | None] = None
+    weights_spec: ClassVar[WeightsSpec | None] = None  # None: weight-free (or a composite of matchers that have one)
     license: ClassVar[str] = ""
     paper: ClassVar[str] = ""
     version: ClassVar[int] = 1

@@ -106,7 +106,7 @@ def test_relevance_maps_equal_gradient_through_eager_attention(tiny_clip, matche
 def test_registered_with_paper_settings():
     cls = get_matcher_class("clip-grad")
     assert cls is ClipGradMatcher and cls.modality is Modality.TEXTUAL and cls.default_sigma == 0.85
-    assert cls.hub_id == "openai/clip-vit-base-patch32"
+    assert cls.weights_spec.hub_id == "openai/clip-vit-base-patch32"
 
 
 @pytest.mark.parametrize("shape", [(640, 360), (301, 517)])

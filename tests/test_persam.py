@@ -107,7 +107,7 @@ def test_registered_with_paper_settings():
     assert persam is PerSamMatcher and persam_f is PerSamFMatcher
     assert (persam.default_sigma, persam_f.default_sigma) == (0.925, 0.61)
     cfg = persam_f.Config()
-    assert (cfg.iterations, cfg.lr) == (1000, 1e-3) and persam.hub_id == "facebook/sam-vit-base"
+    assert (cfg.iterations, cfg.lr) == (1000, 1e-3) and persam.weights_spec.hub_id == "facebook/sam-vit-base"
 
 
 @pytest.mark.parametrize("shape", [(640, 360), (301, 517)])
