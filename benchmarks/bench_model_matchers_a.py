@@ -12,23 +12,9 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from benchmarks.timing import time_matchers
-from pin_match.frameset import Target
-
-
-def _target() -> Target:
-    """PIN-sized references (1280x960 RGBA): a textured disc, so SuperPoint finds keypoints on the object."""
-    rng = np.random.default_rng(1)
-    view = np.zeros((1280, 960, 4), np.uint8)
-    yy, xx = np.mgrid[:1280, :960]
-    inside = (yy - 640) ** 2 + (xx - 480) ** 2 < 350 ** 2
-    view[..., :3] = rng.integers(0, 256, (1280, 960, 3), dtype=np.uint8)
-    view[inside, 3] = 255
-    return Target("bench", "mug", (view, view, view),
-                  ("a red ceramic mug with a white handle", "a mug on the kitchen table", "a red cup"))
+from benchmarks.timing import bench_inputs, time_matchers
 
 
 def _save_models(root: Path) -> dict[str, Path]:
@@ -51,10 +37,7 @@ def _save_models(root: Path) -> dict[str, Path]:
 
 def run(quick: bool) -> dict:
     """Milliseconds per frame (mean over timed frames after one warm-up) and prepare seconds per matcher."""
-    frames = 1 if quick else 3
-    rng = np.random.default_rng(0)
-    images = [rng.integers(0, 256, (640, 360, 3), dtype=np.uint8) for _ in range(frames + 1)]
-    target = _target()
+    target, images = bench_inputs(quick)
     with tempfile.TemporaryDirectory() as tmp:
         paths = {k: str(v) for k, v in _save_models(Path(tmp)).items()}
         options = {

@@ -10,19 +10,9 @@ from __future__ import annotations
 import tempfile
 from pathlib import Path
 
-import numpy as np
 import torch
 
-from benchmarks.timing import time_matchers
-from pin_match.frameset import Target
-
-
-def _target() -> Target:
-    view = np.zeros((1280, 960, 4), np.uint8)  # PIN's reference size, a disc as the alpha mask
-    yy, xx = np.mgrid[:1280, :960]
-    inside = (yy - 640) ** 2 + (xx - 480) ** 2 < 350 ** 2
-    view[inside] = (180, 40, 40, 255)
-    return Target("bench", "mug", (view, view, view), ("a red mug on a table",) * 3)
+from benchmarks.timing import bench_inputs, time_matchers
 
 
 def _save_models(root: Path) -> dict[str, Path]:
@@ -37,10 +27,7 @@ def _save_models(root: Path) -> dict[str, Path]:
 
 def run(quick: bool) -> dict:
     """Milliseconds per frame (mean over timed frames after one warm-up) and prepare seconds per matcher."""
-    frames = 1 if quick else 3
-    rng = np.random.default_rng(0)
-    images = [rng.integers(0, 256, (640, 360, 3), dtype=np.uint8) for _ in range(frames + 1)]
-    target = _target()
+    target, images = bench_inputs(quick)
     with tempfile.TemporaryDirectory() as tmp:
         paths = _save_models(Path(tmp))
         options = {name: {"weights": str(paths[model])}

@@ -8,7 +8,6 @@ stderr naming the culprit and a non-zero exit code, not a traceback.
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
@@ -131,10 +130,6 @@ def main(argv: list[str] | None = None) -> int:
         print(f"pin-match {args.command}: interrupted; rerun the same command to resume", file=sys.stderr)
         return 130
     return 0
-
-
-def print_json(obj: object) -> None:
-    print(json.dumps(obj, indent=2, default=str))
 
 
 if __name__ == "__main__":

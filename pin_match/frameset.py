@@ -168,9 +168,6 @@ class FrameSet:
         """The RGB observation, H x W x 3 uint8."""
         return read_image(self.root / self._frame(frame_id)["image"])
 
-    def image_path(self, frame_id: str) -> Path:
-        return self.root / self._frame(frame_id)["image"]
-
     def instance_mask(self, frame_id: str) -> np.ndarray:
         """Per-pixel ``mask_value`` ids (0 = background); see ``visibility.mask_value``."""
         return read_mask(self.root / self._frame(frame_id)["mask"])
