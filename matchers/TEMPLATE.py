@@ -21,11 +21,11 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from pin_match import CropMatcher, MatcherConfig, MatchResult, Modality, Target, register_matcher
+from pin_match import CropConfig, CropMatcher, MatchResult, Modality, Target, register_matcher
 
 
 @dataclass
-class MeanColorConfig(MatcherConfig):
+class MeanColorConfig(CropConfig):
     """Every field can be set with ``--cfg key=value``; it changes the config hash (cache key)."""
 
     grid: int = 8  # patches per crop side

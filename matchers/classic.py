@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 
 from pin_match.frameset import Target
-from pin_match.matcher import CropMatcher, Matcher, MatcherConfig, MatchResult, Modality
+from pin_match.matcher import CropConfig, CropMatcher, Matcher, MatcherConfig, MatchResult, Modality
 from pin_match.registry import register_matcher
 
 
@@ -27,7 +27,6 @@ def object_pixels(view: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 # --------------------------------------------------------------------------- SIFT
 @dataclass
 class SiftConfig(MatcherConfig):
-    crops: str = "whole"
     ratio: float = 0.8             # Lowe's ratio test
     ransac_px: float = 6.0         # reprojection threshold of the similarity model
     max_features: int = 2000       # observation keypoints kept (strongest first)
@@ -112,7 +111,7 @@ class SiftMatcher(Matcher):
 
 # --------------------------------------------------------------------------- colour
 @dataclass
-class ColorConfig(MatcherConfig):
+class ColorConfig(CropConfig):
     bins_h: int = 18
     bins_s: int = 8
     bins_v: int = 4

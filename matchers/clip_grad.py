@@ -17,7 +17,7 @@ import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatchResult, Modality
+from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, weights_field
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsSpec
 
@@ -57,7 +57,8 @@ def centroid_at(result: MatchResult, sigma: float) -> np.ndarray:
 
 
 @dataclass
-class ClipGradConfig(MatcherConfig):
+class ClipGradConfig(CropConfig):
+    weights: str | None = weights_field()
     point_stride: int = field(default=8, metadata={"help": "crop pixels between stored relevance points"})
 
     def __post_init__(self) -> None:

@@ -23,7 +23,18 @@ import torch
 
 from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropMatcher, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.matcher import (
+    ConfigError,
+    CropConfig,
+    CropMatcher,
+    Matcher,
+    MatcherConfig,
+    MatcherError,
+    MatchResult,
+    Modality,
+    crops_field,
+    weights_field,
+)
 from pin_match.registry import create_matcher, get_matcher_class, register_matcher
 from pin_match.weights import WeightsError, WeightsSpec
 
@@ -209,8 +220,9 @@ def count_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResu
 
 # ---------------------------------------------------------------------------- matchers
 @dataclass
-class KeypointConfig(MatcherConfig):
-    crops: str = "whole"  # PIN matches the whole frame; "pin" also works (max over square crops)
+class KeypointConfig(CropConfig):
+    crops: str = crops_field("whole")  # PIN matches the whole frame; "pin" also works (max over square crops)
+    weights: str | None = weights_field()
     nms_radius: int = 4
     keypoint_threshold: float = 0.005
     max_keypoints: int = 1024
@@ -371,8 +383,6 @@ class IeveConfig(MatcherConfig):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if self.weights is not None:
-            raise ConfigError("matcher ieve has no weights of its own: set gate_weights= and keypoints_weights=")
         if "ieve" in (self.gate, self.keypoints):
             raise ConfigError("matcher ieve cannot use itself as a part")
 
@@ -385,7 +395,7 @@ class IeveMatcher(Matcher):
     (OWL) is switched to ``query="category"`` and so reads the category label, which is why
     this matcher is of the category modality. The gate threshold is internal to the design
     (IEVE's detector has one); the final score, the match count, is still left un-thresholded.
-    The ``crops`` policy of this config is unused: each part keeps its own.
+    Each part keeps its own crop policy.
     """
 
     Config = IeveConfig

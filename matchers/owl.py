@@ -19,7 +19,16 @@ import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.matcher import (
+    ConfigError,
+    CropConfig,
+    CropMatcher,
+    MatcherConfig,
+    MatcherError,
+    MatchResult,
+    Modality,
+    weights_field,
+)
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsSpec
 
@@ -73,7 +82,8 @@ def closest_reference(observations: np.ndarray, references: np.ndarray) -> np.nd
 
 
 @dataclass
-class OwlBaseConfig(MatcherConfig):
+class OwlBaseConfig(CropConfig):
+    weights: str | None = weights_field()
     top_k: int = field(default=100, metadata={"help": "boxes kept per crop, best first (their centres are the points)"})
 
     def __post_init__(self) -> None:

@@ -30,7 +30,16 @@ from matchers.backbones import (
     resolve_checkpoint,
 )
 from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.matcher import (
+    ConfigError,
+    CropConfig,
+    CropMatcher,
+    MatcherConfig,
+    MatcherError,
+    MatchResult,
+    Modality,
+    weights_field,
+)
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsError, WeightsSpec, misfit
 
@@ -90,9 +99,10 @@ def text_target(encode_text: Callable[[Sequence[str]], torch.Tensor], descriptio
 
 
 @dataclass
-class PatchConfig(MatcherConfig):
+class PatchConfig(CropConfig):
     """Backbone settings; ``model_name`` and ``img_size`` may name a smaller model for tests and ablations."""
 
+    weights: str | None = weights_field()
     model_name: str = ""
     img_size: int = 224
     hub_id: str | None = field(default=None, metadata={"help": "hub repository of the weights; default: the "

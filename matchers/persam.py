@@ -34,7 +34,7 @@ import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
 from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropMatcher, MatcherConfig, MatchResult, Modality
+from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, weights_field
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsSpec
 
@@ -43,7 +43,8 @@ PAPER = "Personalize Segment Anything Model with One Shot (Zhang et al., ICLR 20
 
 
 @dataclass
-class PerSamConfig(MatcherConfig):
+class PerSamConfig(CropConfig):
+    weights: str | None = weights_field()
     point_stride: int = field(default=8, metadata={"help": "crop pixels between stored mask points"})
     refine: bool = field(default=True, metadata={"help": "PerSAM's two cascaded mask refinements"})
 

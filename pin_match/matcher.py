@@ -39,27 +39,45 @@ class ConfigError(ValueError):
     """An unknown or ill-typed configuration key."""
 
 
+def crops_field(default: str = "pin") -> Any:
+    """The ``crops`` config field, for matchers that see frames through a crop policy."""
+    return field(default=default, metadata={"help": f"crop policy, one of {', '.join(POLICIES)}"})
+
+
+def weights_field() -> Any:
+    """The ``weights`` config field, for matchers that load a checkpoint."""
+    return field(default=None, metadata={"help": "local file or folder overriding the default weights"})
+
+
 @dataclass
 class MatcherConfig:
     """Settings shared by every matcher; subclasses add their own fields.
 
-    Fields whose metadata says ``hash=False`` do not change results and stay out of the
-    config hash that names caches and score tables.
+    Only ``device`` is common: a matcher declares ``crops: str = crops_field()`` and
+    ``weights: str | None = weights_field()`` itself when it uses them, so a key that
+    does nothing is refused instead of being hashed into a new id. Fields whose metadata
+    says ``hash=False`` do not change results and stay out of the config hash.
     """
 
-    crops: str = "pin"
-    weights: str | None = field(default=None, metadata={"help": "local file or folder overriding the hub weights"})
-    device: str = field(default="cpu", metadata={"hash": False})
+    device: str = field(default="cpu", metadata={"hash": False, "help": "torch device, e.g. cpu or cuda:0"})
 
     def __post_init__(self) -> None:
-        if self.crops not in POLICIES:
-            raise ConfigError(f"crops={self.crops!r}: choose one of {POLICIES}")
+        crops = getattr(self, "crops", None)
+        if crops is not None and crops not in POLICIES:
+            raise ConfigError(f"crops={crops!r}: choose one of {POLICIES}")
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
 
     def hashed_dict(self) -> dict[str, Any]:
         return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.metadata.get("hash", True)}
+
+
+@dataclass
+class CropConfig(MatcherConfig):
+    """The config of a ``CropMatcher``: it sees frames through a crop policy."""
+
+    crops: str = crops_field()
 
 
 def _point_array(a: Any) -> np.ndarray:
@@ -212,6 +230,8 @@ class CropMatcher(Matcher):
     at once (so a backbone runs one batch) and returns results in crop pixel coordinates;
     this class maps points back to the frame and takes the max over crops.
     """
+
+    Config: ClassVar[type[MatcherConfig]] = CropConfig
 
     @abstractmethod
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]: ...

@@ -6,11 +6,11 @@ import os
 import time
 from dataclasses import dataclass
 
-from pin_match import CropMatcher, MatcherConfig, MatchResult, Modality, register_matcher
+from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
 
 
 @dataclass
-class SlowConfig(MatcherConfig):
+class SlowConfig(CropConfig):
     delay: float = 0.2
 
 

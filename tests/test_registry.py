@@ -25,7 +25,6 @@ from pin_match.registry import UnknownMatcherError, parse_overrides
 
 @dataclass
 class BrightConfig(MatcherConfig):
-    crops: str = "whole"
     gain: float = 1.0
     channels: tuple[int, ...] = (0, 1, 2)
     verbose: bool = False
@@ -72,7 +71,12 @@ def test_config_coercion_and_errors():
     with pytest.raises(ConfigError, match=r"cannot read 'abc'"):
         create_matcher("test-bright", gain="abc")
     with pytest.raises(ConfigError, match=r"crops='diagonal'"):
-        create_matcher("test-bright", crops="diagonal")
+        create_matcher("color", crops="diagonal")
+    # keys a matcher does not use are refused, not hashed into a new id
+    with pytest.raises(ConfigError, match=r"matcher 'test-bright' has no config key 'crops'"):
+        create_matcher("test-bright", crops="pin")
+    with pytest.raises(ConfigError, match=r"matcher 'sift' has no config key 'weights'"):
+        create_matcher("sift", weights="/nonexistent")
     with pytest.raises(ConfigError, match="expected key=value"):
         parse_overrides(["gain"])
     assert parse_overrides(["gain=2", "crops = pin"]) == {"gain": "2", "crops": "pin"}

@@ -18,7 +18,7 @@ import pytest
 import slow_plugin  # noqa: F401  (registers test-slow)
 
 from conftest import make_view
-from pin_match import CropMatcher, MatcherConfig, MatchResult, Modality, register_matcher
+from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.cli import main
 from pin_match.frameset import FrameSet
 from pin_match.frameset_writer import FrameSetWriter
@@ -27,7 +27,7 @@ from pin_match.scoring import score
 
 
 @dataclass
-class NaNConfig(MatcherConfig):
+class NaNConfig(CropConfig):
     value: float = float("nan")
 
 
