@@ -14,13 +14,14 @@ from pathlib import Path
 
 import pandas as pd
 
+from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
 from pin_match.labels import frame_labels, scored_frames
 from pin_match.report import side_by_side
 from pin_match.scoretable import ScoreTable
 
 
-class AnalysisError(ValueError):
+class AnalysisError(PinMatchError, ValueError):
     """A bench folder is incomplete or does not belong to the given frame-set."""
 
 

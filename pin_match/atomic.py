@@ -17,8 +17,10 @@ from typing import Any
 
 import numpy as np
 
+from pin_match.errors import PinMatchError
 
-class OutputError(OSError):
+
+class OutputError(PinMatchError, OSError):
     """An output location cannot be written (read-only folder, full disk)."""
 
 

@@ -1,8 +1,9 @@
 """pin-match: score, tune and report PIN matchers on frame-sets, offline.
 
 A thin command line over the same functions notebooks call. Every failure a user can
-cause (bad frame-set, unknown matcher or key, unwritable output) ends in one line on
-stderr naming the culprit and a non-zero exit code, not a traceback.
+cause (bad frame-set, unknown matcher or key, unwritable output) is a ``PinMatchError``
+and ends in one line on stderr naming the culprit, exit code 2. Any other exception is a
+bug and keeps its traceback.
 """
 
 from __future__ import annotations
@@ -11,15 +12,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from pin_match.atomic import OutputError
-from pin_match.frameset import FrameSetError
-from pin_match.matcher import ConfigError, MatcherError
-from pin_match.registry import UnknownMatcherError, parse_overrides
-from pin_match.scoretable import ScoreTableError
-from pin_match.weights import WeightsError
-
-USER_ERRORS = (FrameSetError, ConfigError, MatcherError, UnknownMatcherError, ScoreTableError, OutputError,
-               WeightsError, ValueError, FileNotFoundError)
+from pin_match.errors import PinMatchError
+from pin_match.registry import parse_overrides
 
 
 def _cmd_synth(a: argparse.Namespace) -> None:
@@ -123,7 +117,7 @@ def main(argv: list[str] | None = None) -> int:
     args = build_parser().parse_args(argv)
     try:
         args.func(args)
-    except USER_ERRORS as exc:
+    except PinMatchError as exc:
         print(f"pin-match {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -17,6 +17,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pin_match.errors import PinMatchError
+
 FORMAT_NAME = "pin-match-frameset"
 FORMAT_VERSION = 1
 ROLES = ("target", "same_category", "other")
@@ -34,7 +36,7 @@ FRAMES = "frames.parquet"
 VISIBILITY = "visibility.parquet"
 
 
-class FrameSetError(ValueError):
+class FrameSetError(PinMatchError, ValueError):
     """A frame-set on disk is missing something or contradicts itself."""
 
 

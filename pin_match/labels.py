@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
+from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
 from pin_match.scoretable import ScoreTable, points_at
 
@@ -21,7 +22,7 @@ LABEL_COLUMNS = ["frame_id", "episode_id", "step", "split", "target_category", "
                  "other_visible", "target_pixels", "target_depth", "target_seen"]
 
 
-class LabelError(ValueError):
+class LabelError(PinMatchError, ValueError):
     """Scores and ground truth do not fit together."""
 
 

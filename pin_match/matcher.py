@@ -21,6 +21,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from pin_match.crops import POLICIES, Crop, crop_boxes
+from pin_match.errors import PinMatchError
 from pin_match.frameset import Target
 from pin_match.weights import WeightsSpec
 
@@ -31,11 +32,11 @@ class Modality(str, Enum):
     CATEGORY = "category"  # may read the category label (an ablation in the paper)
 
 
-class MatcherError(RuntimeError):
+class MatcherError(PinMatchError, RuntimeError):
     """A matcher was misused or produced an invalid result."""
 
 
-class ConfigError(ValueError):
+class ConfigError(PinMatchError, ValueError):
     """An unknown or ill-typed configuration key."""
 
 

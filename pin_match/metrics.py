@@ -17,6 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from pin_match.errors import PinMatchError
+
 SCORED_COLUMNS = ["frame_id", "episode_id", "step", "target_category", "target_visible", "same_visible",
                   "other_visible", "target_seen", "score"]
 CLASSES = ("TM", "CM", "GM", "OM")  # frame class codes 0..3, in PIN's order of precedence
@@ -30,7 +32,7 @@ RANKING_KEYS = ("auroc_target", "ap_target", "auroc_same", "ap_same")
 LOCALISATION_KEYS = ("localisation_accuracy", "localisation_point_precision")
 
 
-class MetricsError(ValueError):
+class MetricsError(PinMatchError, ValueError):
     """A scored-frame table the metrics cannot be computed on."""
 
 

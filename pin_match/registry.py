@@ -17,6 +17,7 @@ from collections.abc import Callable
 from importlib.metadata import entry_points
 from typing import Any
 
+from pin_match.errors import PinMatchError
 from pin_match.matcher import ConfigError, Matcher, MatcherConfig
 
 ENTRY_POINT_GROUP = "pin_match.matchers"
@@ -42,7 +43,7 @@ BUILTINS: dict[str, str] = {
 _REGISTRY: dict[str, type[Matcher]] = {}
 
 
-class UnknownMatcherError(KeyError):
+class UnknownMatcherError(PinMatchError, KeyError):
     def __str__(self) -> str:  # KeyError would quote the message
         return str(self.args[0])
 

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
+from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
 from pin_match.labels import frame_labels, localisation_hits, scored_frames
 from pin_match.metrics import CLASSES, bootstrap_ci, detection_metrics, frame_arrays, localisation_metrics, per_category
@@ -33,7 +34,7 @@ CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
 MAX_PLOT_POINTS = 2000
 
 
-class ReportError(ValueError):
+class ReportError(PinMatchError, ValueError):
     """Scores, frame-set and threshold do not belong together."""
 
 

@@ -15,13 +15,14 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
+from pin_match.errors import PinMatchError
 
 COLUMNS = ["frame_id", "episode_id", "step", "split", "score", "crop_scores", "points_x", "points_y",
            "point_scores"]
 META_KEY = b"pin_match"
 
 
-class ScoreTableError(ValueError):
+class ScoreTableError(PinMatchError, ValueError):
     pass
 
 

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
+from pin_match.errors import PinMatchError
 from pin_match.labels import scored_frames
 from pin_match.metrics import detection_metrics
 from pin_match.scoretable import ScoreTable
@@ -28,7 +29,7 @@ DEFAULT_MATCH_FLOOR = 50.0
 THRESHOLDS_DIR = Path("thresholds")
 
 
-class TuningError(ValueError):
+class TuningError(PinMatchError, ValueError):
     """No sigma can be chosen, or a thresholds file cannot be used."""
 
 

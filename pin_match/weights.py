@@ -11,8 +11,10 @@ import os
 from dataclasses import dataclass
 from pathlib import Path
 
+from pin_match.errors import PinMatchError
 
-class WeightsError(FileNotFoundError):
+
+class WeightsError(PinMatchError, FileNotFoundError):
     pass
 
 
