@@ -38,7 +38,6 @@ class MeanColorMatcher(CropMatcher):
     Config = MeanColorConfig
     modality = Modality.VISUAL     # VISUAL: reference views; TEXTUAL: descriptions; CATEGORY: may read the label
     default_sigma = 0.9            # the threshold a user should start from (never applied here)
-    license = "MIT"
     paper = ""
     version = 1                    # bump when a change alters results, so old caches are not reused
 

@@ -48,7 +48,6 @@ class SiftMatcher(Matcher):
     Config = SiftConfig
     modality = Modality.VISUAL
     default_sigma = 8.0
-    license = "OpenCV (Apache-2.0); SIFT patent expired 2020"
     paper = "Lowe, Distinctive Image Features from Scale-Invariant Keypoints, IJCV 2004"
     parallel_frames = True
 
@@ -134,7 +133,6 @@ class ColorMatcher(CropMatcher):
     Config = ColorConfig
     modality = Modality.VISUAL
     default_sigma = 0.5
-    license = "OpenCV (Apache-2.0)"
     paper = "Swain & Ballard, Color Indexing, IJCV 1991"
     parallel_frames = True
 

@@ -75,7 +75,6 @@ class ClipGradMatcher(CropMatcher):
     modality = Modality.TEXTUAL
     default_sigma = 0.85
     weights_spec = WEIGHTS
-    license = WEIGHTS.license
     paper = "CLIP on Wheels (Gadre et al., CVPR 2023), relevance after Chefer et al. (ICCV 2021)"
 
     def __init__(self, cfg: ClipGradConfig | None = None) -> None:

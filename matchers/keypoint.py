@@ -10,8 +10,6 @@ size and would run SuperPoint on every reference again for every frame.
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 from abc import abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -298,7 +296,6 @@ class SuperGlueMatcher(GlueMatcher):
     modality = Modality.VISUAL
     default_sigma = 8.0
     weights_spec = SUPERGLUE_WEIGHTS
-    license = SUPERGLUE_WEIGHTS.license
     paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
 
     def _load(self, source: str) -> torch.nn.Module:
@@ -332,7 +329,6 @@ class LightGlueMatcher(GlueMatcher):
     modality = Modality.VISUAL
     default_sigma = 100.0  # IEVE's "confirmed" match count
     weights_spec = LIGHTGLUE_WEIGHTS
-    license = LIGHTGLUE_WEIGHTS.license
     paper = "Lindenberger et al., LightGlue: Local Feature Matching at Light Speed, ICCV 2023"
 
     def _load(self, source: str) -> torch.nn.Module:
@@ -415,11 +411,8 @@ class IeveMatcher(Matcher):
         self.gate = create_matcher(self.cfg.gate, **gate_options)
         self.keypoints = create_matcher(self.cfg.keypoints, **keypoint_options)
 
-    @property
-    def config_hash(self) -> str:
-        """Also covers the parts' ids, so a new version of either part never reuses the composite's caches."""
-        payload = json.dumps([super().config_hash, self.gate.id, self.keypoints.id])
-        return hashlib.sha256(payload.encode()).hexdigest()[:12]
+    def parts(self) -> dict[str, Matcher]:
+        return {"gate": self.gate, "keypoints": self.keypoints}
 
     def _prepare(self, target: Target) -> None:
         # the full target: a category-modality gate gets the label, any other gate strips it itself

@@ -97,7 +97,6 @@ class OwlBase(CropMatcher):
 
     default_sigma = 0.25  # PIN paper (its config file uses 0.2)
     weights_spec = WEIGHTS
-    license = WEIGHTS.license
     paper = PAPER
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:

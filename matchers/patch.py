@@ -236,7 +236,6 @@ class DinoMatcher(TimmPrototypeMatcher):
 
     Config = DinoConfig
     weights_spec = WeightsSpec("timm/vit_base_patch16_224.dino", filename="model.safetensors", license="apache-2.0")
-    license = weights_spec.license
     default_sigma = 0.575
     paper = "Caron et al., Emerging Properties in Self-Supervised Vision Transformers, ICCV 2021"
 
@@ -248,7 +247,6 @@ class Dinov2Matcher(TimmPrototypeMatcher):
     Config = Dinov2Config
     weights_spec = WeightsSpec("timm/vit_base_patch14_dinov2.lvd142m", filename="model.safetensors",
                                license="apache-2.0")
-    license = weights_spec.license
     default_sigma = 0.5
     paper = "Oquab et al., DINOv2: Learning Robust Visual Features without Supervision, TMLR 2024"
 
@@ -286,7 +284,6 @@ class ClipMatcher(ReferencePrototypeMatcher):
 
     Config = ClipConfig
     weights_spec = CLIP_WEIGHTS
-    license = CLIP_WEIGHTS.license
     default_sigma = 0.575
     paper = CLIP_PAPER
 
@@ -300,7 +297,6 @@ class ClipTextMatcher(PatchSimilarityMatcher):
 
     Config = ClipConfig
     weights_spec = CLIP_WEIGHTS
-    license = CLIP_WEIGHTS.license
     modality = Modality.TEXTUAL
     default_sigma = 0.28
     paper = CLIP_PAPER

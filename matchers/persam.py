@@ -109,7 +109,6 @@ class PerSamMatcher(CropMatcher):
     modality = Modality.VISUAL
     default_sigma = 0.925
     weights_spec = WEIGHTS
-    license = WEIGHTS.license
     paper = PAPER
     _fine_tunes = False  # PerSAM-F learns mask weights per reference in prepare
 

@@ -1,25 +1,43 @@
-"""What ``pin-match list`` shows: every registered matcher and whether it can run offline now."""
+"""What ``pin-match list`` shows: every registered matcher and whether it can run offline now.
+
+Each matcher is built with its default config (which loads nothing), so what is listed is
+what the instance really is: its modality may depend on the config, and a composite's
+weights are those of its parts.
+"""
 
 from __future__ import annotations
 
 import pandas as pd
 
-from pin_match.registry import get_matcher_class, list_matchers
+from pin_match.errors import PinMatchError
+from pin_match.matcher import Matcher
+from pin_match.registry import create_matcher, list_matchers
+
+COLUMNS = ["name", "modality", "default_sigma", "weights", "license"]
+
+
+def weights_status(matcher: Matcher) -> tuple[str, str]:
+    """(where the weights come from and whether they are local, their license); parts are listed by role."""
+    spec = matcher.weights_spec
+    if spec is not None:
+        state = "available" if spec.available() else "not local, pass weights="
+        return f"{spec.source} ({state})", spec.license
+    if not matcher.parts():
+        return "none (weight-free)", ""
+    parts = [(role, part, *weights_status(part)) for role, part in matcher.parts().items()]
+    return ("; ".join(f"{role} {part.display_name}: {where}" for role, part, where, _ in parts),
+            "; ".join(f"{role}: {lic}" for role, _, _, lic in parts if lic))
 
 
 def matcher_catalog(pattern: str = "*") -> pd.DataFrame:
     rows = []
     for name in list_matchers(pattern):
         try:
-            cls = get_matcher_class(name)
-        except ImportError as exc:  # a plug-in whose dependencies are missing is listed, not fatal
-            rows.append(dict(name=name, modality="?", default_sigma=None, weights=f"cannot import: {exc}"))
+            matcher = create_matcher(name)
+        except (ImportError, PinMatchError) as exc:  # a plug-in that cannot load is listed, not fatal
+            rows.append(dict(name=name, modality="?", default_sigma=None, weights=f"cannot load: {exc}", license=""))
             continue
-        spec = cls.weights_spec
-        if spec is None:
-            weights = "none (weight-free, or a composite: see its parts)"
-        else:
-            weights = "cached locally" if spec.available() else f"not local (hub: {spec.hub_id}; pass weights=)"
-        rows.append(dict(name=name, modality=cls.modality.value, default_sigma=cls.default_sigma, weights=weights))
-    return pd.DataFrame(rows, columns=["name", "modality", "default_sigma", "weights"])
-
+        weights, license_ = weights_status(matcher)
+        rows.append(dict(name=name, modality=matcher.modality.value, default_sigma=matcher.default_sigma,
+                         weights=weights, license=license_))
+    return pd.DataFrame(rows, columns=COLUMNS)

@@ -126,7 +126,6 @@ class Matcher(ABC):
     modality: ClassVar[Modality] = Modality.VISUAL
     default_sigma: ClassVar[float] = 0.5
     weights_spec: ClassVar[WeightsSpec | None] = None  # None: weight-free (or a composite of matchers that have one)
-    license: ClassVar[str] = ""
     paper: ClassVar[str] = ""
     version: ClassVar[int] = 1
 
@@ -144,7 +143,14 @@ class Matcher(ABC):
 
     @property
     def config_hash(self) -> str:
-        payload = dict(matcher=self.display_name, version=self.version, config=self.cfg.hashed_dict())
+        """Hash of name, version, config and the weights' identity (content for local files), never of a path."""
+        config = self.cfg.hashed_dict()
+        weights = config.pop("weights", None)
+        payload = dict(matcher=self.display_name, version=self.version, config=config)
+        if self.weights_spec is not None:
+            payload["weights"] = self.weights_spec.identity(weights)
+        if self.parts():  # a new version of a part never reuses the composite's caches
+            payload["parts"] = {role: part.id for role, part in self.parts().items()}
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
     @property
@@ -174,6 +180,10 @@ class Matcher(ABC):
         for image, result in zip(images, results):
             self._validate(result, image.shape[0], image.shape[1])
         return results
+
+    def parts(self) -> dict[str, Matcher]:
+        """The matchers a composite is built from, by role (their weights are listed by ``pin-match list``)."""
+        return {}
 
     def embed_reference(self, view: np.ndarray) -> np.ndarray:
         """A global embedding of one RGBA reference (the paper's similarity analysis)."""

