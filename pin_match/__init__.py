@@ -1,7 +1,7 @@
 """pin_match: matchers for Personalized Instance-based Navigation, benchmarked offline."""
 
 from pin_match.crops import Crop, crop_boxes
-from pin_match.frameset import FrameSet, FrameSetError, Target
+from pin_match.frameset import FrameSet, FrameSetError
 from pin_match.matcher import (
     ConfigError,
     CropConfig,
@@ -11,6 +11,7 @@ from pin_match.matcher import (
     MatcherError,
     MatchResult,
     Modality,
+    Target,
 )
 from pin_match.registry import create_matcher, list_matchers, register_matcher
 

@@ -66,12 +66,7 @@ def load_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = Non
         if report.get("frameset_fingerprint") != fs.fingerprint:
             raise AnalysisError(f"{path} reports frame-set {report.get('frameset_fingerprint')}, "
                                 f"not {fs.root} ({fs.fingerprint})")
-        score_dir = root / "scores" / matcher_id / fs.fingerprint
-        candidates = sorted(score_dir.glob("scores*.parquet"))
-        preferred = score_dir / "scores_all.parquet"
-        if not candidates:
-            raise AnalysisError(f"no score table of {matcher_id} under {score_dir}")
-        tables[name] = ScoreTable.read(preferred if preferred.exists() else candidates[0])
+        tables[name] = ScoreTable.read(root / "scores" / matcher_id / fs.fingerprint)
         sigmas[name] = float(report["sigma"])  # tuned on train, or the default when tuning failed (sigma_source)
         threshold_file = root / "thresholds" / f"{name}.json"
         if threshold_file.exists():

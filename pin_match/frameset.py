@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
@@ -18,13 +17,12 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
+from pin_match.matcher import N_DESCRIPTIONS, N_VIEWS, Target, TargetError
 
 FORMAT_NAME = "pin-match-frameset"
 FORMAT_VERSION = 1
 ROLES = ("target", "same_category", "other")
 SPLITS = ("train", "val")
-N_VIEWS = 3
-N_DESCRIPTIONS = 3
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 MANIFEST = "frameset.json"
@@ -38,33 +36,6 @@ VISIBILITY = "visibility.parquet"
 
 class FrameSetError(PinMatchError, ValueError):
     """A frame-set on disk is missing something or contradicts itself."""
-
-
-@dataclass(frozen=True)
-class Target:
-    """What a matcher is told about the object to find."""
-
-    object_id: str
-    category: str
-    views: tuple[np.ndarray, ...]  # RGBA uint8, view 0 frontal (30 deg yaw), 1 back, 2 top
-    descriptions: tuple[str, ...]
-    view_paths: tuple[str, ...] = field(default=(), compare=False)
-
-    def __post_init__(self) -> None:
-        if len(self.views) != N_VIEWS:
-            raise FrameSetError(f"target {self.object_id}: expected {N_VIEWS} views, got {len(self.views)}")
-        for i, view in enumerate(self.views):
-            where = self.view_paths[i] if i < len(self.view_paths) else f"view {i}"
-            if view.ndim != 3 or view.shape[2] != 4 or view.dtype != np.uint8:
-                raise FrameSetError(
-                    f"target {self.object_id}: {where} must be RGBA uint8, got shape {view.shape} {view.dtype}"
-                )
-            if not view[..., 3].any():
-                raise FrameSetError(f"target {self.object_id}: {where} has an empty alpha mask")
-        if len(self.descriptions) != N_DESCRIPTIONS:
-            raise FrameSetError(
-                f"target {self.object_id}: expected {N_DESCRIPTIONS} descriptions, got {len(self.descriptions)}"
-            )
 
 
 def read_image(path: str | Path, *, rgba: bool = False) -> np.ndarray:
@@ -196,9 +167,12 @@ class FrameSet:
             raise FrameSetError(f"unknown object id {object_id!r} in {self.root / OBJECTS}")
         paths = view_files(self.root / OBJECT_IMAGES / object_id)
         views = tuple(read_image(p, rgba=True) for p in paths)
-        return Target(object_id=object_id, category=str(obj.iloc[0]["category"]), views=views,
-                      descriptions=tuple(self.descriptions[object_id]),
-                      view_paths=tuple(str(p) for p in paths))
+        try:
+            return Target(object_id=object_id, category=str(obj.iloc[0]["category"]), views=views,
+                          descriptions=tuple(self.descriptions[object_id]),
+                          view_paths=tuple(str(p) for p in paths))
+        except TargetError as exc:
+            raise FrameSetError(f"{self.root}: {exc}") from exc
 
     def episode(self, episode_id: str) -> pd.Series:
         rows = self.episodes[self.episodes.episode_id == episode_id]

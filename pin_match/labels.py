@@ -13,7 +13,7 @@ import pandas as pd
 
 from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
-from pin_match.scoretable import ScoreTable, points_at
+from pin_match.scoretable import ScoreTable, points_at, require_finite
 
 SEEN_MIN_FRACTION = 0.05  # PIN: the target covers more than 5 % of the frame ...
 SEEN_MAX_DEPTH_M = 5.0    # ... and its mean depth is below 5 m
@@ -73,11 +73,7 @@ def scored_frames(labels: pd.DataFrame, table: ScoreTable) -> pd.DataFrame:
     if len(unknown):
         raise LabelError(f"score table of {table.matcher_id} has frame {unknown.iloc[0]!r}, which the frame-set "
                          f"does not contain (scored on another frame-set?)")
-    values = scores.score.to_numpy(float)
-    bad = ~np.isfinite(values)
-    if bad.any():
-        raise LabelError(f"score table of {table.matcher_id}: frame {scores.frame_id[bad].iloc[0]!r} has a "
-                         f"non-finite score {values[bad][0]}")
+    require_finite(scores.frame_id, scores.score, f"score table of {table.matcher_id}", LabelError)
     return labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
 
 

@@ -1,4 +1,9 @@
-"""The one interface every matcher shares: prepare once per target, then score images.
+"""The matcher contract, a leaf module (numpy only): the target, the result, the base classes, the config.
+
+Matchers import this module and nothing of the frame-set storage; everything a plug-in
+needs is here and in ``pin_match.registry``.
+
+The one interface every matcher shares: prepare once per target, then score images.
 
 A matcher returns a score (higher = more likely the target) and the image points where
 it believes the target is, each with its own score, and never applies a threshold: the
@@ -22,7 +27,6 @@ import numpy as np
 
 from pin_match.crops import POLICIES, Crop, crop_boxes
 from pin_match.errors import PinMatchError
-from pin_match.frameset import Target
 from pin_match.weights import WeightsSpec
 
 
@@ -30,6 +34,41 @@ class Modality(str, Enum):
     VISUAL = "visual"      # reference views only
     TEXTUAL = "textual"    # descriptions only
     CATEGORY = "category"  # may read the category label (an ablation in the paper)
+
+
+N_VIEWS = 3         # reference views per target: 0 frontal (30 deg yaw), 1 back, 2 top
+N_DESCRIPTIONS = 3  # human-written descriptions per target
+
+
+class TargetError(PinMatchError, ValueError):
+    """A target that is not what every matcher may assume (3 RGBA views with a mask, 3 descriptions)."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """What a matcher is told about the object to find."""
+
+    object_id: str
+    category: str
+    views: tuple[np.ndarray, ...]  # RGBA uint8, view 0 frontal (30 deg yaw), 1 back, 2 top
+    descriptions: tuple[str, ...]
+    view_paths: tuple[str, ...] = field(default=(), compare=False)
+
+    def __post_init__(self) -> None:
+        if len(self.views) != N_VIEWS:
+            raise TargetError(f"target {self.object_id}: expected {N_VIEWS} views, got {len(self.views)}")
+        for i, view in enumerate(self.views):
+            where = self.view_paths[i] if i < len(self.view_paths) else f"view {i}"
+            if view.ndim != 3 or view.shape[2] != 4 or view.dtype != np.uint8:
+                raise TargetError(
+                    f"target {self.object_id}: {where} must be RGBA uint8, got shape {view.shape} {view.dtype}"
+                )
+            if not view[..., 3].any():
+                raise TargetError(f"target {self.object_id}: {where} has an empty alpha mask")
+        if len(self.descriptions) != N_DESCRIPTIONS:
+            raise TargetError(
+                f"target {self.object_id}: expected {N_DESCRIPTIONS} descriptions, got {len(self.descriptions)}"
+            )
 
 
 class MatcherError(PinMatchError, RuntimeError):
@@ -109,9 +148,14 @@ class MatchResult:
 
     def points_at(self, sigma: float) -> np.ndarray:
         """The target's coordinates under threshold sigma (empty when the frame is not matched)."""
-        if self.score < sigma:
-            return np.zeros((0, 2), np.float32)
-        return self.points[self.scores_of_points() >= sigma]
+        return points_above(self.score, self.points, self.scores_of_points(), sigma)
+
+
+def points_above(score: float, points: np.ndarray, point_scores: np.ndarray, sigma: float) -> np.ndarray:
+    """The caller's threshold rule: no points unless the frame is matched, then the points scoring >= sigma."""
+    if score < sigma:
+        return np.zeros((0, 2), np.float32)
+    return points[point_scores >= sigma]
 
 
 class Matcher(ABC):
@@ -128,6 +172,8 @@ class Matcher(ABC):
     weights_spec: ClassVar[WeightsSpec | None] = None  # None: weight-free (or a composite of matchers that have one)
     paper: ClassVar[str] = ""
     version: ClassVar[int] = 1
+    # True when match_batch is thread-safe after prepare: scoring then spreads frames over threads
+    parallel_frames: ClassVar[bool] = False
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         self.cfg = cfg if cfg is not None else self.Config()

@@ -18,6 +18,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
+from pin_match.scoretable import require_finite
 
 SCORED_COLUMNS = ["frame_id", "episode_id", "step", "target_category", "target_visible", "same_visible",
                   "other_visible", "target_seen", "score"]
@@ -58,10 +59,8 @@ def frame_arrays(scored: pd.DataFrame) -> FrameArrays:
     missing = [c for c in SCORED_COLUMNS if c not in scored.columns]
     if missing:
         raise MetricsError(f"scored-frame table lacks columns {missing}")
+    require_finite(scored.frame_id, scored.score, "scored-frame table", MetricsError)
     score = scored["score"].to_numpy(np.float64)
-    bad = ~np.isfinite(score)
-    if bad.any():
-        raise MetricsError(f"frame {scored.frame_id.to_numpy()[bad][0]!r} has a non-finite score {score[bad][0]}")
     codes, episode_ids = pd.factorize(scored["episode_id"], sort=False)
     step = scored["step"].to_numpy(np.int64)
     order = None

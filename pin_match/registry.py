@@ -57,8 +57,11 @@ def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Ma
         existing = _REGISTRY.get(name)
         if existing is not None and existing is not cls and not overwrite and \
                 existing.__qualname__ != cls.__qualname__:
-            raise ValueError(f"matcher name {name!r} is already registered by {existing.__module__}")
-        cls.name = name
+            raise ConfigError(f"matcher name {name!r} is already registered by {existing.__module__}")
+        if "name" not in vars(cls):
+            # the first name a class is registered under is its own (ids and caches carry it);
+            # later names (an entry point's, an alias) only point at it and never rename it
+            cls.name = name
         _REGISTRY[name] = cls
         return cls
 

@@ -16,6 +16,7 @@ import pandas as pd
 
 from pin_match import atomic
 from pin_match.errors import PinMatchError
+from pin_match.matcher import points_above
 
 COLUMNS = ["frame_id", "episode_id", "step", "split", "score", "crop_scores", "points_x", "points_y",
            "point_scores"]
@@ -65,7 +66,7 @@ class ScoreTable:
 
         path = Path(path)
         if path.is_dir():
-            path = path / "scores.parquet"
+            path = table_in(path)
         if not path.exists():
             raise ScoreTableError(f"no score table at {path}")
         try:
@@ -79,15 +80,34 @@ class ScoreTable:
         missing = [c for c in COLUMNS if c not in frames.columns]
         if missing:
             raise ScoreTableError(f"{path} lacks columns {missing}")
-        if not np.isfinite(frames.score.to_numpy(float)).all():
-            bad = frames.frame_id[~np.isfinite(frames.score.to_numpy(float))].iloc[0]
-            raise ScoreTableError(f"{path}: frame {bad!r} has a non-finite score")
+        require_finite(frames.frame_id, frames.score, str(path), ScoreTableError)
         return cls(frames, json.loads(raw))
 
 
+def table_in(directory: Path) -> Path:
+    """The score table a scoring run left in its cache folder: the merged ``scores_all.parquet``, else the only one."""
+    merged = directory / "scores_all.parquet"
+    if merged.exists():
+        return merged
+    candidates = sorted(directory.glob("scores*.parquet"))
+    if len(candidates) == 1:
+        return candidates[0]
+    if not candidates:
+        raise ScoreTableError(f"no score table (scores*.parquet) in {directory}")
+    raise ScoreTableError(f"{directory} holds {len(candidates)} score tables ({', '.join(c.name for c in candidates)})"
+                          f" and no scores_all.parquet: name one of them")
+
+
+def require_finite(frame_ids: pd.Series, scores: pd.Series, where: str,
+                   error: type[PinMatchError] = ScoreTableError) -> None:
+    """A non-finite score would silently count as unmatched: the one rule, naming the first bad frame."""
+    values = np.asarray(scores, np.float64)
+    bad = ~np.isfinite(values)
+    if bad.any():
+        raise error(f"{where}: frame {np.asarray(frame_ids)[bad][0]!r} has a non-finite score {values[bad][0]}")
+
+
 def points_at(row: pd.Series, sigma: float) -> np.ndarray:
-    if row["score"] < sigma:
-        return np.zeros((0, 2), np.float32)
-    keep = np.asarray(row["point_scores"], np.float32) >= sigma
-    return np.stack([np.asarray(row["points_x"], np.float32)[keep], np.asarray(row["points_y"], np.float32)[keep]],
-                    axis=1)
+    """A stored row's target coordinates under sigma, by the same rule as ``MatchResult.points_at``."""
+    points = np.stack([np.asarray(row["points_x"], np.float32), np.asarray(row["points_y"], np.float32)], axis=1)
+    return points_above(float(row["score"]), points, np.asarray(row["point_scores"], np.float32), sigma)

@@ -2,7 +2,8 @@
 
 One place builds them so the family tests and the contract test load the same files
 through the matchers' real ``weights=`` path. Sizes obey each config's consistency rules
-(see ../shared/ENVIRONMENT.md) and keep a forward pass in milliseconds.
+(OWL: projection_dim = text hidden size; SAM: num_pos_feats = output_channels / 2, decoder
+and prompt sizes = output_channels, image_embedding_size = image_size / patch) and keep a forward pass in milliseconds.
 """
 
 from __future__ import annotations
@@ -134,7 +135,7 @@ def tiny_overrides(root: Path) -> dict[str, dict]:
         "owl": dict(weights=owl), "owl-image": dict(weights=owl),
         "superglue": dict(weights=save_tiny_superglue(root / "superglue"), max_keypoints=48),
         "lightglue": dict(weights=lightglue, max_keypoints=48),
-        "ieve": dict(gate_weights=owl, keypoints_weights=lightglue),
+        "ieve": dict(gate_weights=owl, keypoints="lightglue", keypoints_weights=lightglue),
         "persam": dict(weights=save_tiny_sam(root / "sam")),
         "persam-f": dict(weights=str(root / "sam"), iterations=3),
     }
