@@ -127,10 +127,6 @@ class FrameSet:
         return cls(root, manifest, objects, descriptions, episodes, records, frames, visibility)
 
     # ----------------------------------------------------------------- access
-    @property
-    def has_depth(self) -> bool:
-        return "depth" in self.frames.columns and self.frames["depth"].notna().all()
-
     def _frame(self, frame_id: str) -> pd.Series:
         try:
             return self._frame_index.loc[frame_id]

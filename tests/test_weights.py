@@ -40,3 +40,37 @@ def test_weights_of_another_architecture_are_refused(tmp_path, monkeypatch):
     ok = create_matcher("dino", model_name="vit_small_patch16_224", img_size=32, weights=str(path))
     ok.prepare(_target())
     assert np.isfinite(ok.match(np.zeros((64, 48, 3), np.uint8)).score)
+
+
+def test_changed_weights_behind_the_same_path_change_the_id(tmp_path):
+    path = tmp_path / "w.safetensors"
+    path.write_bytes(b"first")
+    first = create_matcher("dino", weights=str(path)).id
+    assert create_matcher("dino", weights=str(path)).id == first  # same content, same id
+    path.write_bytes(b"second")
+    assert create_matcher("dino", weights=str(path)).id != first
+    moved = tmp_path / "renamed.safetensors"
+    path.rename(moved)
+    assert create_matcher("dino", weights=str(moved)).id == create_matcher("dino", weights=str(moved)).id
+    copy = tmp_path / "copy.safetensors"
+    copy.write_bytes(b"second")
+    assert create_matcher("dino", weights=str(copy)).id == create_matcher("dino", weights=str(moved)).id
+
+
+def test_carrier_package_missing_or_damaged_is_named(monkeypatch, tmp_path):
+    spec = WeightsSpec(package="pin_match_no_such_pkg", package_file="w/model.pth", distribution="no-such-pkg")
+    with pytest.raises(WeightsError, match=r"w/model.pth ship in the pip package no-such-pkg, which is not installed"):
+        spec.resolve(None)
+    assert not spec.available() and spec.identity(None)["version"] is None
+    (tmp_path / "fake_carrier").mkdir()
+    (tmp_path / "fake_carrier" / "__init__.py").write_text("")
+    monkeypatch.syspath_prepend(str(tmp_path))
+    lacking = WeightsSpec(package="fake_carrier", package_file="w/model.pth")
+    with pytest.raises(WeightsError, match=r"fake_carrier is installed but lacks w/model.pth"):
+        lacking.resolve(None)
+    (tmp_path / "fake_carrier" / "w").mkdir()
+    (tmp_path / "fake_carrier" / "w" / "model.pth").write_bytes(b"not a torch file")
+    assert lacking.resolve(None) == tmp_path / "fake_carrier" / "w" / "model.pth"
+    from pin_match.weights import load_torch_state
+    with pytest.raises(WeightsError, match=r"cannot read the checkpoint .*model.pth \(damaged"):
+        load_torch_state(lacking.resolve(None), "matcher x")
