@@ -11,7 +11,8 @@ an entry point so pin_match finds it on its own::
 
 This template is a working matcher: the mean colour of the target against the mean
 colour of image patches. It is registered under "template-mean-color" only when this
-file is imported, so it never appears in a normal ``pin-match list``.
+file is imported, so it never appears in a normal ``pin-match list``. Test yours with
+``pin_match.testing.check_matcher("my-matcher")``.
 """
 
 from __future__ import annotations
