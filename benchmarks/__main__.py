@@ -16,7 +16,8 @@ import time
 import traceback
 
 MODULES = ("bench_pipeline", "bench_weight_free", "bench_sweep", "bench_synth", "bench_memory",
-           "bench_model_matchers_a", "bench_model_matchers_b")
+           "bench_model_matchers_a", "bench_model_matchers_b", "bench_distributed", "bench_training",
+           "bench_glue_matchers", "bench_effnet")
 
 
 def machine() -> dict:

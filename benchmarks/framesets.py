@@ -51,3 +51,13 @@ def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> F
                 mask[y:y + 64, x:x + 64] = 1
             w.add_frame(episode_id, step, image, mask, {1: ("box", "target")})
     return w.close()
+
+
+def real_photos(seed: int = 0) -> FrameSet:
+    """The real-photo frame-set (``pin-match realset``; needs scikit-image), cached per seed."""
+    from pin_match.realset import build
+
+    root = CACHE / ("realset" if seed == 0 else f"realset_seed{seed}")
+    if (root / "frameset.json").exists():
+        return FrameSet.load(root)
+    return build(root, seed=seed, overwrite=True)

@@ -171,3 +171,71 @@ class OpenClipBackbone:
     def encode_text(self, texts: Sequence[str]) -> torch.Tensor:
         tokens = self.tokenizer(list(texts)).to(self.device)
         return self.model.encode_text(tokens).float().cpu()
+
+
+# ------------------------------------------------------------------ CNN feature maps (EfficientNet-Lite)
+def _layer_modules(model: torch.nn.Module, layer: str) -> list[torch.nn.Module]:
+    """The modules that compute ``layer`` ("blocks.N" or "head") of a timm EfficientNet, in order."""
+    stem = [model.conv_stem, model.bn1]
+    if layer == "head":
+        return [*stem, *model.blocks, model.conv_head, model.bn2]
+    return [*stem, *model.blocks[:int(layer.removeprefix("blocks.")) + 1]]
+
+
+def timm_state_dict(model: torch.nn.Module, state: dict[str, torch.Tensor], source: str) -> dict[str, torch.Tensor]:
+    """``state`` in timm's names: as is when the names match, else mapped one to one in order and shape.
+
+    The order mapping is what makes a carrier's layout (EfficientNet-PyTorch names such as
+    ``_blocks.0._depthwise_conv.weight``) load: the same tensors in the same order. A file
+    whose count or any shape differs is refused with a ValueError naming ``source``.
+    """
+    target = model.state_dict()
+    if set(state) == set(target):
+        return state
+    if len(state) != len(target):
+        raise ValueError(f"{source} holds {len(state)} tensors, {type(model).__name__} has {len(target)}")
+    for (src_name, src), (name, dst) in zip(state.items(), target.items()):
+        if tuple(src.shape) != tuple(dst.shape):
+            raise ValueError(f"{source}: tensor {src_name} has shape {tuple(src.shape)}, {name} needs "
+                             f"{tuple(dst.shape)}")
+    return dict(zip(target, state.values()))
+
+
+class EfficientNetBackbone:
+    """A timm EfficientNet cut at one layer: its feature map's cells are the patch tokens.
+
+    Only the modules up to ``layer`` are kept and run, so a stride-16 layer costs the early
+    stages only. The global vector is the feature map's mean over cells (the network's own
+    pooling, before its classifier), which ``embed_reference`` uses.
+    """
+
+    def __init__(self, model_name: str, state: dict[str, torch.Tensor], img_size: int, layer: str, source: str,
+                 device: str = "cpu") -> None:
+        import timm
+
+        model = timm.create_model(model_name, pretrained=False)
+        if not hasattr(model, "conv_stem") or not hasattr(model, "blocks"):
+            raise ValueError(f"timm model {model_name} is not an EfficientNet-style network")
+        model.load_state_dict(timm_state_dict(model, state, source))
+        self.trunk = torch.nn.Sequential(*_layer_modules(model, layer)).eval()
+        with torch.inference_mode():  # the layer's stride, measured: timm lists only some blocks' reductions
+            stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]
+        if img_size % stride:
+            raise ValueError(f"img_size {img_size} is not a multiple of layer {layer}'s stride {stride}")
+        self.trunk = self.trunk.to(device)
+        cfg = model.pretrained_cfg
+        self.mean, self.std, self.interpolation = cfg["mean"], cfg["std"], cfg.get("interpolation", "bicubic")
+        self.input_size, self.grid, self.stride, self.device = img_size, img_size // stride, stride, device
+
+    @torch.inference_mode()
+    def feature_map(self, x: torch.Tensor) -> torch.Tensor:
+        """(B, C, grid, grid) for a normalised (B, 3, S, S) batch: the bare network, what benchmarks time."""
+        return self.trunk(x)
+
+    @torch.inference_mode()
+    def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
+        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
+        fmap = self.feature_map(x).float()
+        if fmap.shape[-2:] != (self.grid, self.grid):
+            raise ValueError(f"feature map {tuple(fmap.shape[-2:])} is not the expected {self.grid} x {self.grid}")
+        return PatchFeatures(cls=fmap.mean((2, 3)).cpu(), patches=fmap.flatten(2).transpose(1, 2).cpu())

@@ -2,7 +2,9 @@
 
 The score is how strongly the last attention block's CLS row, weighted by the gradient of
 the image-text logit, points at any patch (Chefer et al.'s relevance, last block only);
-the points are the pixels of that relevance map. We run transformers' CLIPModel but
+the points are the pixels of that relevance map. As in CoW, the map that is thresholded is
+10 x the relevance upsampled bilinearly to the 224 x 224 input; the score is that map's
+maximum, so any sigma the score reaches keeps at least one point. We run transformers' CLIPModel but
 recompute the last block ourselves, so the post-softmax attention probabilities are a leaf
 of the graph and autograd gives their gradient without tracking the rest of the network.
 """
@@ -16,8 +18,7 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, weights_field
+from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, Target, weights_field
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsSpec
 
@@ -42,24 +43,11 @@ def relevance(attn_probs: torch.Tensor, attn_grads: torch.Tensor) -> torch.Tenso
     return rel[..., 0, 1:]
 
 
-def centroid_at(result: MatchResult, sigma: float) -> np.ndarray:
-    """CoW's "centroid" localisation, recomputed for any sigma: one relevance-weighted point.
-
-    The centroid of the points above sigma depends on sigma, so it cannot be stored in the
-    result; this derives it from the stored relevance pixels. Returns ``(0, 2)`` when the
-    frame is not matched, else ``(1, 2)`` (over all crops, in frame pixels).
-    """
-    scores = result.scores_of_points()
-    keep = scores >= sigma
-    if result.score < sigma or not keep.any():
-        return np.zeros((0, 2), np.float32)
-    return np.average(result.points[keep], axis=0, weights=scores[keep])[None].astype(np.float32)
-
-
 @dataclass
 class ClipGradConfig(CropConfig):
     weights: str | None = weights_field()
-    point_stride: int = field(default=8, metadata={"help": "crop pixels between stored relevance points"})
+    point_stride: int = field(default=8, metadata={
+        "help": "pixels of the 224 x 224 relevance map between stored points (its maximum is always stored)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -69,13 +57,14 @@ class ClipGradConfig(CropConfig):
 
 @register_matcher("clip-grad")
 class ClipGradMatcher(CropMatcher):
-    """Score = 10 x max gradient relevance over patches; points = relevance pixels, each with its value."""
+    """Score = max of 10 x the gradient relevance upsampled to the input size; points = that map's pixels."""
 
     Config = ClipGradConfig
     modality = Modality.TEXTUAL
     default_sigma = 0.85
     weights_spec = WEIGHTS
     paper = "CLIP on Wheels (Gadre et al., CVPR 2023), relevance after Chefer et al. (ICCV 2021)"
+    version = 2  # 2: score from the upsampled map CoW thresholds (was: the 7 x 7 grid)
 
     def __init__(self, cfg: ClipGradConfig | None = None) -> None:
         super().__init__(cfg)
@@ -108,7 +97,8 @@ class ClipGradMatcher(CropMatcher):
 
     # ------------------------------------------------------------------ images
     def _pixels(self, crops: list[np.ndarray]) -> torch.Tensor:
-        """Square crops -> CLIP input: bicubic resize to the model size, CLIP normalisation."""
+        """Square crops -> CLIP input as CoW feeds it: ToTensor, torchvision's antialiased bicubic resize of a float
+        tensor (which can overshoot [0, 1]; CoW does not clamp, so neither do we), CLIP normalisation."""
         from open_clip.constants import OPENAI_DATASET_MEAN, OPENAI_DATASET_STD
 
         size = self._model.config.vision_config.image_size
@@ -118,7 +108,7 @@ class ClipGradMatcher(CropMatcher):
         for crop in crops:
             x = torch.from_numpy(crop).permute(2, 0, 1)[None].float() / 255.0
             x = F.interpolate(x, size=(size, size), mode="bicubic", align_corners=False, antialias=True)
-            batch.append(x.clamp(0, 1))
+            batch.append(x)
         return ((torch.cat(batch) - mean) / std).to(self.cfg.device)
 
     def relevance_maps(self, crops: list[np.ndarray]) -> torch.Tensor:
@@ -163,17 +153,23 @@ class ClipGradMatcher(CropMatcher):
         return x.reshape(b, t, n_heads, d // n_heads).transpose(1, 2)
 
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
-        maps = RELEVANCE_SCALE * self.relevance_maps(crops).amax(dim=1)  # max over descriptions
+        size = self._model.config.vision_config.image_size
+        maps = RELEVANCE_SCALE * self.relevance_maps(crops).detach()
+        # CoW's map per description, then the best description per pixel (PIN matches if any description does)
+        up = F.interpolate(maps, size=(size, size), mode="bilinear", align_corners=False).amax(dim=1).cpu().numpy()
         stride = self.cfg.point_stride
+        grid = np.arange(stride // 2, size, stride)
+        gx, gy = (a.ravel() for a in np.meshgrid(grid, grid))
         results = []
-        for crop, rmap in zip(crops, maps):
+        for crop, rmap, raw in zip(crops, up, maps.amax(dim=1).cpu().numpy()):
             h, w = crop.shape[:2]
-            up = F.interpolate(rmap[None, None], size=(h, w), mode="bilinear", align_corners=False)[0, 0]
-            ys, xs = np.arange(stride // 2, h, stride), np.arange(stride // 2, w, stride)
-            gx, gy = np.meshgrid(xs, ys)
-            values = up.detach().cpu().numpy()[gy, gx]
-            results.append(MatchResult(score=float(rmap.max()), points=np.stack([gx.ravel(), gy.ravel()], 1),
-                                       point_scores=values.ravel(), heatmap=rmap.detach().cpu().numpy()))
+            iy, ix = np.unravel_index(int(rmap.argmax()), rmap.shape)
+            on_grid = iy % stride == stride // 2 and ix % stride == stride // 2
+            rows, cols = (gy, gx) if on_grid else (np.append(gy, iy), np.append(gx, ix))
+            # map pixel centres into crop pixels
+            points = np.stack([(cols + 0.5) * w / size - 0.5, (rows + 0.5) * h / size - 0.5], 1)
+            results.append(MatchResult(score=float(rmap[iy, ix]), points=np.clip(points, 0, [w - 1, h - 1]),
+                                       point_scores=rmap[rows, cols], heatmap=raw))
         return results
 
 

@@ -2,14 +2,16 @@
 
 SuperPoint finds keypoints in the observation and in PIN's six prepared references (three
 views, each at two scales on a white 360x360 canvas); a graph matcher pairs them. The
-references' keypoints are computed once per target and the transformers model's
-pair-matching stage is called directly, because its ``forward`` only pairs images of one
-size and would run SuperPoint on every reference again for every frame.
+references' keypoints are computed once per target, because the transformers models'
+``forward`` only pairs images of one size and would run SuperPoint on every reference
+again for every frame. SuperGlue's matching stage is run here from the model's public
+modules, one pair at a time on its real keypoints (see ``superglue_pair``).
 """
 
 from __future__ import annotations
 
 import dataclasses
+import math
 from abc import abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -20,7 +22,6 @@ import numpy as np
 import torch
 
 from matchers.hf_load import load_pretrained
-from pin_match.frameset import Target
 from pin_match.matcher import (
     ConfigError,
     CropConfig,
@@ -30,6 +31,7 @@ from pin_match.matcher import (
     MatcherError,
     MatchResult,
     Modality,
+    Target,
     crops_field,
     weights_field,
 )
@@ -204,10 +206,71 @@ def object_points(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> np.ndarra
     return np.asarray(obs_xy, np.float32).reshape(-1, 2)[idx]
 
 
-def superglue_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
-    """Score = sum of the confidences of all valid matches (all references); points = those on the object."""
-    score = float(sum(p.confidence.sum() for p in pairs))
-    return MatchResult(score=score, points=object_points(pairs, obs_xy))
+SUPERGLUE_COMBINE = ("sum", "max")
+
+
+def superglue_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray, combine: str = "sum") -> MatchResult:
+    """Score = the confidences of the valid matches summed per reference, then summed (or, with
+    ``combine="max"``, the best reference's sum); points = the matches on the object, all references."""
+    per_reference = [float(p.confidence.sum()) for p in pairs]
+    if combine not in SUPERGLUE_COMBINE:
+        raise ValueError(f"superglue_verdict: combine={combine!r}, choose one of {SUPERGLUE_COMBINE}")
+    score = sum(per_reference) if combine == "sum" else max(per_reference, default=0.0)
+    return MatchResult(score=float(score), points=object_points(pairs, obs_xy))
+
+
+# ---------------------------------------------------------------------------- SuperGlue's matching stage
+def normalize_keypoints(xy: torch.Tensor, height: int, width: int) -> torch.Tensor:
+    """SuperGlue's keypoint normalisation: centred on the image, divided by 0.7 x its longer side."""
+    return (xy - xy.new_tensor([width / 2, height / 2])) / (0.7 * max(height, width))
+
+
+def log_optimal_transport(scores: torch.Tensor, bin_score: torch.Tensor, iterations: int) -> torch.Tensor:
+    """SuperGlue's entropic optimal transport of one pair's ``(m, n)`` scores, with a dustbin row and column.
+
+    The marginals come from this pair's own m and n, as in the original SuperGlue: every
+    keypoint has mass 1 / (m + n), the dustbins n / (m + n) and m / (m + n). Padding the
+    block to a batch's largest keypoint count changes them, and with the 20 Sinkhorn
+    iterations PIN runs that lowers the confidences by several percent. Log-space Sinkhorn;
+    returns the ``(m + 1, n + 1)`` log assignment multiplied by m + n.
+    """
+    m, n = scores.shape
+    alpha = bin_score.to(scores).reshape(1, 1)
+    couplings = torch.cat([torch.cat([scores, alpha.expand(m, 1)], 1), torch.cat([alpha.expand(1, n), alpha], 1)], 0)
+    norm = -math.log(m + n)
+    log_mu = torch.cat([scores.new_full((m,), norm), scores.new_tensor([math.log(n) + norm])])
+    log_nu = torch.cat([scores.new_full((n,), norm), scores.new_tensor([math.log(m) + norm])])
+    u, v = torch.zeros_like(log_mu), torch.zeros_like(log_nu)
+    for _ in range(iterations):
+        u = log_mu - torch.logsumexp(couplings + v[None, :], dim=1)
+        v = log_nu - torch.logsumexp(couplings + u[:, None], dim=0)
+    return couplings + u[:, None] + v[None, :] - norm
+
+
+def superglue_pair(model: torch.nn.Module, xy: tuple[torch.Tensor, torch.Tensor],
+                   descriptors: tuple[torch.Tensor, torch.Tensor], scores: tuple[torch.Tensor, torch.Tensor],
+                   iterations: int, threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
+    """SuperGlue on one pair of unpadded keypoint sets (already normalised), with the model's public modules.
+
+    Keypoint encoder, self / cross attention layers updating both sets at once, final
+    projection, scores / sqrt(D), optimal transport on the real m x n block, then matches
+    that are mutual best and whose confidence exceeds ``threshold``. Returns
+    ``(matches0 (m,), matches1 (n,), confidence0 (m,), confidence1 (n,))``, -1 for no match.
+    """
+    desc = [d[None] + model.keypoint_encoder(k[None], s[None])[0] for d, k, s in zip(descriptors, xy, scores)]
+    for layer, kind in zip(model.gnn.layers, model.gnn.layers_types):
+        sources = desc[::-1] if kind == "cross" else desc
+        desc = [d + layer(d, encoder_hidden_states=src)[0] for d, src in zip(desc, sources)]
+    proj0, proj1 = (model.final_projection(d)[0] for d in desc)
+    log_p = log_optimal_transport(proj0 @ proj1.T / proj0.shape[-1] ** 0.5, model.bin_score, iterations)[:-1, :-1]
+    best0, best1 = log_p.max(1), log_p.max(0)
+    mutual0 = best1.indices[best0.indices] == torch.arange(len(best0.indices), device=log_p.device)
+    mutual1 = best0.indices[best1.indices] == torch.arange(len(best1.indices), device=log_p.device)
+    conf0 = torch.where(mutual0, best0.values.exp(), log_p.new_zeros(()))
+    conf1 = torch.where(mutual1, conf0[best1.indices], log_p.new_zeros(()))
+    valid0 = mutual0 & (conf0 > threshold)
+    valid1 = mutual1 & valid0[best1.indices]
+    return (torch.where(valid0, best0.indices, -1), torch.where(valid1, best1.indices, -1), conf0, conf1)
 
 
 def count_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
@@ -286,33 +349,57 @@ class GlueMatcher(CropMatcher):
 @dataclass
 class SuperGlueMatcherConfig(KeypointConfig):
     sinkhorn_iterations: int = 20
+    combine: str = field(default="sum", metadata={
+        "help": "score over the six references: sum (PIN's 'sum of confidences', as read here) or max"})
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.combine not in SUPERGLUE_COMBINE:
+            raise ConfigError(f"combine={self.combine!r}: choose one of {SUPERGLUE_COMBINE}")
+        if self.sinkhorn_iterations < 0:
+            raise ConfigError(f"sinkhorn_iterations={self.sinkhorn_iterations}: must be >= 0")
 
 
 @register_matcher("superglue")
 class SuperGlueMatcher(GlueMatcher):
-    """PIN's SuperGlue baseline: score = sum of the confidences of the valid matches over the six references."""
+    """PIN's SuperGlue baseline: score = sum of the confidences of the valid matches over the six references.
+
+    Each observation-reference pair is matched on its own keypoints (``superglue_pair``), as
+    magicleap's SuperGlue does, so the optimal transport's marginals are the pair's real counts.
+    """
 
     Config = SuperGlueMatcherConfig
     modality = Modality.VISUAL
     default_sigma = 8.0
     weights_spec = SUPERGLUE_WEIGHTS
     paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
+    version = 2  # 2: optimal transport per pair with its real keypoint counts (was: padded batch)
 
     def _load(self, source: str) -> torch.nn.Module:
         from transformers import SuperGlueConfig, SuperGlueForKeypointMatching
 
         config = SuperGlueConfig.from_pretrained(source)
-        config.sinkhorn_iterations = self.cfg.sinkhorn_iterations
         self._configure_detector(config.keypoint_detector_config)
         return SuperGlueForKeypointMatching.from_pretrained(source, config=config)
 
     def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-        matches, conf, _, _ = self._model._match_image_pair(pairs.keypoints, pairs.descriptors, pairs.scores,
-                                                            height, width, mask=pairs.mask)
+        """Each pair unpadded: the references' keypoints were moved into the observation's frame, so one
+        normalisation with the observation's size is each image's own (``to_frame_of``)."""
+        r, _, n = pairs.mask.shape
+        matches = torch.full((r, 2, n), -1, dtype=torch.long, device=pairs.keypoints.device)
+        conf = torch.zeros((r, 2, n), device=pairs.keypoints.device)
+        xy = normalize_keypoints(pairs.keypoints, height, width)
+        for i in range(r):
+            m0, m1 = (int(c) for c in pairs.mask[i].sum(1))
+            out = superglue_pair(self._model, (xy[i, 0, :m0], xy[i, 1, :m1]),
+                                 (pairs.descriptors[i, 0, :m0], pairs.descriptors[i, 1, :m1]),
+                                 (pairs.scores[i, 0, :m0], pairs.scores[i, 1, :m1]),
+                                 self.cfg.sinkhorn_iterations, self.cfg.match_threshold)
+            matches[i, 0, :m0], matches[i, 1, :m1], conf[i, 0, :m0], conf[i, 1, :m1] = out
         return matches, conf
 
     def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
-        return superglue_verdict(pairs, obs_xy)
+        return superglue_verdict(pairs, obs_xy, self.cfg.combine)
 
 
 @dataclass
@@ -374,7 +461,8 @@ class IeveConfig(MatcherConfig):
     gate: str = field(default="owl", metadata={"help": "registered matcher giving category boxes"})
     gate_weights: str | None = field(default=None, metadata={"help": "weights= of the gate"})
     gate_sigma: float = field(default=0.2, metadata={"help": "the gate's own box threshold (IEVE's detector)"})
-    keypoints: str = field(default="lightglue", metadata={"help": "registered matcher giving matched keypoints"})
+    keypoints: str = field(default="disk-lightglue", metadata={
+        "help": "registered matcher giving matched keypoints (IEVE: DISK + LightGlue)"})
     keypoints_weights: str | None = field(default=None, metadata={"help": "weights= of the keypoint matcher"})
 
     def __post_init__(self) -> None:
@@ -388,9 +476,10 @@ class IeveMatcher(Matcher):
     """IEVE-style: a category detector opens a box, keypoint matches inside it are counted.
 
     Both parts are registered matchers built by name. A gate whose config has a ``query`` field
-    (OWL) is switched to ``query="category"`` and so reads the category label, which is why
-    this matcher is of the category modality. The gate threshold is internal to the design
-    (IEVE's detector has one); the final score, the match count, is still left un-thresholded.
+    (OWL) is switched to ``query="category"``, asked as CoW's "a photo of a {}.", and so reads
+    the category label, which is why this matcher is of the category modality. The gate threshold
+    is internal to the design (IEVE's detector has one); the final score, the match count, is
+    still left un-thresholded.
     Each part keeps its own crop policy.
     """
 
@@ -403,8 +492,11 @@ class IeveMatcher(Matcher):
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)
         gate_options: dict[str, Any] = {}
-        if "query" in {f.name for f in dataclasses.fields(get_matcher_class(self.cfg.gate).Config)}:
+        gate_fields = {f.name for f in dataclasses.fields(get_matcher_class(self.cfg.gate).Config)}
+        if "query" in gate_fields:
             gate_options["query"] = "category"
+        if "prompt" in gate_fields:  # a category word alone is a poor query: CoW and PIN ask "a photo of a {}."
+            gate_options["prompt"] = "a-photo-of"
         if self.cfg.gate_weights is not None:
             gate_options["weights"] = self.cfg.gate_weights
         keypoint_options = {"weights": self.cfg.keypoints_weights} if self.cfg.keypoints_weights is not None else {}

@@ -1,5 +1,10 @@
 """OWL-ViT B/32 matchers: text queries (PIN's OWL) and the closest reference as query (PIN's image-to-image).
 
+Text queries are, by default, each description as written, one query each: CLIP on Wheels'
+``ClipOwl`` sends one sentence per target and no template average, and PIN feeds its
+descriptions through that class. OWL-ViT reads 16 tokens (start and end included), so a
+longer prompt is cut; the matcher says so once per target instead of cutting silently.
+
 Both score a crop by its most confident box and keep the centres of the ``top_k`` most
 confident boxes with their scores (CoW's "center_only"), so any sigma can be applied later
 without scoring again. One vision pass per crop gives the box features, the boxes and the
@@ -8,6 +13,7 @@ pooled embedding that the image-to-image mode compares with the references.
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
@@ -18,7 +24,6 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.frameset import Target
 from pin_match.matcher import (
     ConfigError,
     CropConfig,
@@ -27,6 +32,7 @@ from pin_match.matcher import (
     MatcherError,
     MatchResult,
     Modality,
+    Target,
     weights_field,
 )
 from pin_match.registry import register_matcher
@@ -34,6 +40,11 @@ from pin_match.weights import WeightsSpec
 
 WEIGHTS = WeightsSpec("google/owlvit-base-patch32", license="Apache-2.0")
 QUERIES = ("descriptions", "category")
+PROMPTS = {  # how each query text becomes OWL's text input(s)
+    "description": ("{}",),              # the text alone (default)
+    "a-photo-of": ("a photo of a {}.",),  # CoW's ClipOwl sentence, written there for class names
+    "imagenet-80": None,                 # averaged over CLIP's 80 ImageNet templates
+}
 PAPER = "Minderer et al., Simple Open-Vocabulary Object Detection with Vision Transformers, ECCV 2022"
 
 
@@ -138,12 +149,20 @@ class OwlBase(CropMatcher):
 @dataclass
 class OwlConfig(OwlBaseConfig):
     query: str = field(default="descriptions", metadata={"help": "descriptions (textual) or category (ablation)"})
-    templates: bool = field(default=True, metadata={"help": "average each query over CLIP's 80 ImageNet prompts"})
+    prompt: str = field(default="description", metadata={
+        "help": "description (the text alone), a-photo-of (CoW's 'a photo of a {}.') or imagenet-80 (average of "
+                "CLIP's 80 templates)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
         if self.query not in QUERIES:
             raise ConfigError(f"query={self.query!r}: choose one of {QUERIES}")
+        if self.prompt not in PROMPTS:
+            raise ConfigError(f"prompt={self.prompt!r}: choose one of {tuple(PROMPTS)}")
+
+
+class TruncationWarning(UserWarning):
+    """A text query is longer than OWL-ViT's 16 tokens and is cut before its end."""
 
 
 @register_matcher("owl")
@@ -156,12 +175,14 @@ class OwlMatcher(OwlBase):
 
     Config = OwlConfig
     modality = Modality.TEXTUAL
+    version = 2  # 2: the description alone by default (was: the 80-template average), truncation warned
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)
         if self.cfg.query == "category":
             self.modality = Modality.CATEGORY
         self._queries: torch.Tensor | None = None
+        self._warned: set[str] = set()  # targets whose truncated prompts were already reported
 
     @torch.inference_mode()
     def _prepare(self, target: Target) -> None:
@@ -170,20 +191,35 @@ class OwlMatcher(OwlBase):
             raise MatcherError(f"matcher {self.display_name}: target {target.object_id} has an empty "
                                f"{'description' if self.cfg.query == 'descriptions' else 'category'}")
         self._load()
-        self._queries = self._text_queries(texts)
+        self._queries = self._text_queries(texts, target.object_id)
 
-    def _text_queries(self, texts: Sequence[str]) -> torch.Tensor:
-        """One unit vector per text: its text embedding averaged over the prompt templates."""
+    def _text_queries(self, texts: Sequence[str], object_id: str) -> torch.Tensor:
+        """One unit vector per text: its text embedding (averaged over the prompts when there are several)."""
         from open_clip.zero_shot_metadata import OPENAI_IMAGENET_TEMPLATES
 
-        templates = OPENAI_IMAGENET_TEMPLATES if self.cfg.templates else (lambda c: c,)
+        formats = PROMPTS[self.cfg.prompt]
+        templates = OPENAI_IMAGENET_TEMPLATES if formats is None else [f.format for f in formats]
         prompts = [t(text) for text in texts for t in templates]
-        tokenizer = clip_tokenizer(self._model.config.text_config.max_position_embeddings)
+        limit = self._model.config.text_config.max_position_embeddings
+        tokenizer = clip_tokenizer(limit)
+        self._warn_truncated(tokenizer, prompts, limit, object_id)
         tokens = tokenizer(prompts, padding="max_length", truncation=True, return_tensors="pt").to(self.cfg.device)
         emb = self._model.owlvit.get_text_features(input_ids=tokens["input_ids"],
                                                    attention_mask=tokens["attention_mask"]).pooler_output
         emb = F.normalize(emb.float(), dim=-1).reshape(len(texts), len(templates), -1).mean(1)
         return F.normalize(emb, dim=-1)
+
+    def _warn_truncated(self, tokenizer: Any, prompts: Sequence[str], limit: int, object_id: str) -> None:
+        """One warning per target listing the prompts OWL-ViT will not read to the end (start and end tokens count)."""
+        if object_id in self._warned:
+            return
+        lengths = [len(ids) for ids in tokenizer(list(prompts), truncation=False)["input_ids"]]
+        cut = sorted({p for p, n in zip(prompts, lengths) if n > limit})
+        if cut:
+            self._warned.add(object_id)
+            warnings.warn(f"matcher {self.display_name}: target {object_id}: {len(cut)} prompt(s) longer than "
+                          f"OWL-ViT's {limit} tokens are cut before their end, e.g. {cut[0]!r} "
+                          f"({max(lengths)} tokens at most)", TruncationWarning, stacklevel=2)
 
     @torch.inference_mode()
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:

@@ -29,7 +29,6 @@ from matchers.backbones import (
     TimmBackbone,
     resolve_checkpoint,
 )
-from pin_match.frameset import Target
 from pin_match.matcher import (
     ConfigError,
     CropConfig,
@@ -38,6 +37,7 @@ from pin_match.matcher import (
     MatcherError,
     MatchResult,
     Modality,
+    Target,
     weights_field,
 )
 from pin_match.registry import register_matcher

@@ -1,26 +1,29 @@
 """PerSAM and PerSAM-F: SAM ViT-B features matched to a one-shot target embedding, then SAM's mask.
 
-The score is the best cosine between an observation's SAM encoder features and the target
-embedding pooled from a reference under its alpha mask; the points are the pixels of the
-mask SAM draws from the most and least similar locations. Compared with Personalize-SAM:
-- kept: the target embedding (PerSAM mean; PerSAM-F 0.5 mean + 0.5 channel max), the
-  positive (argmax) / negative (argmin) point, PerSAM's target-guided attention and
-  target-semantic prompting (transformers' SamModel takes both natively), the two cascaded
-  refinements (mask logits as input, then the mask's box), PerSAM-F's two mixing weights of
-  the three multimask outputs, learnt on the reference with Dice + focal loss, AdamW, cosine
-  schedule;
-- changed: three references instead of one (score = max over them; the reference that
-  reaches it supplies the embedding, points and PerSAM-F weights); points and similarity
-  are picked on SAM's feature grid (inside the unpadded area) instead of the upsampled map;
-  a grid cell is inside the reference mask when the object covers at least half of it
-  (PerSAM samples the mask bilinearly at the cell centre), or, for an object smaller than
-  that, when it is the most covered cell, so the mask never comes out empty; PerSAM-F's
-  loss is computed on the decoder's low-resolution logits (the unpadded part) instead of
-  full-size ones: SAM is frozen and the prompt fixed, so the decoder runs once and the
-  1000 steps cost milliseconds; an empty mask before the box refinement gets the box of
-  the positive point's cell instead of failing.
-Points carry no own score: every mask pixel is reported when the crop's score passes
-sigma, as PIN uses the mask of a detection.
+The steps follow Personalize-SAM's ``persam.py`` / ``persam_f.py`` on transformers' SamModel:
+- target embedding: the reference's SAM features at the grid cells where its mask, put
+  through SAM's own preprocessing (resized, normalised like the image, zero-padded) and
+  sampled bilinearly at the cell centres, is above 0; PerSAM averages them, PerSAM-F takes
+  0.5 x mean + 0.5 x channel max;
+- similarity map: cosine of each cell with the target, upsampled x4 and then like SAM's
+  masks (to the padded input, unpadded, to the image), so it is at image resolution;
+  the score is its maximum and the positive point its argmax (PerSAM: the negative point
+  its argmin), so the point prompts and the score come from one map;
+- PerSAM: target-guided attention (the standardised map, resized to the grid, sigmoid)
+  and target-semantic prompting in the first decoding, then refinement 1 (mask logits as
+  input, three masks, best predicted IoU) and refinement 2 (plus the mask's box);
+- PerSAM-F: at test time the positive point only; the three multimask logits mixed with
+  the learnt weights, the box of that mixed mask and its logits feed refinement 1, then
+  refinement 2 as in PerSAM. The two weights are learnt on the reference at its own
+  resolution (Dice + focal loss, AdamW lr 1e-3, eps 1e-4, cosine schedule, 1000 steps).
+Changed for PIN: three references instead of one (score = max over them; the reference
+that reaches it supplies the embedding, points and PerSAM-F weights); the reference mask
+is the alpha channel (> 0); a mask with no cell above 0 (an object smaller than a cell)
+keeps its best cell, and an empty mask before a box refinement gets the box of the
+positive point's cell, where Personalize-SAM would fail.
+Points carry no own score: every pixel of the final mask (on a stride grid; the positive
+point when the mask is empty) is reported when the crop's score passes sigma, as PIN uses
+the mask of a detection.
 """
 
 from __future__ import annotations
@@ -33,8 +36,7 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, weights_field
+from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, Target, weights_field
 from pin_match.registry import register_matcher
 from pin_match.weights import WeightsSpec
 
@@ -103,14 +105,16 @@ def fit_mask_weights(logits: torch.Tensor, target: torch.Tensor, iterations: int
 
 @register_matcher("persam")
 class PerSamMatcher(CropMatcher):
-    """Score = max cosine of SAM features to the target embedding; points = SAM's mask from the best point."""
+    """Score = max of the upsampled cosine map of SAM features to the target; points = SAM's mask from its argmax."""
 
     Config = PerSamConfig
     modality = Modality.VISUAL
     default_sigma = 0.925
     weights_spec = WEIGHTS
     paper = PAPER
+    version = 2  # 2: score and points from the image-resolution map, reference cells as Personalize-SAM takes them
     _fine_tunes = False  # PerSAM-F learns mask weights per reference in prepare
+    _negative_point = True  # PerSAM prompts the argmin as a negative point; PerSAM-F does not
 
     def __init__(self, cfg: PerSamConfig | None = None) -> None:
         super().__init__(cfg)
@@ -140,41 +144,48 @@ class PerSamMatcher(CropMatcher):
         embeddings, mixes = [], []
         for view in target.views:
             feats, valid = self._encode([np.ascontiguousarray(view[..., :3])])
-            cover = self._grid_cover(view[..., 3], feats.shape[-1])
-            inside = feats[0][:, cover >= min(0.5, float(cover.max()))]  # (C, n)
-            embeddings.append(self._pool(inside))
+            cells = self.reference_cells(view[..., 3], feats.shape[-1])
+            embeddings.append(self._pool(feats[0][:, cells]))  # (C, n) -> (C,)
             if self._fine_tunes:
-                mixes.append(self._fit_weights(feats, valid[0], view[..., 3], embeddings[-1]))
+                mixes.append(self._fit_weights(feats, valid[0], view[..., 3] > 0, embeddings[-1]))
         return torch.stack(embeddings), torch.stack(mixes) if self._fine_tunes else None
 
     @staticmethod
     def _pool(inside: torch.Tensor) -> torch.Tensor:
         return inside.mean(dim=1)
 
-    def _grid_cover(self, alpha: np.ndarray, grid: int) -> torch.Tensor:
-        """The fraction of each grid cell the object covers, its alpha mask resized and padded like the image."""
+    def reference_cells(self, alpha: np.ndarray, grid: int) -> torch.Tensor:
+        """The grid cells Personalize-SAM pools: the mask (alpha > 0 as 0 / 255) resized like the image (PIL
+        bilinear), normalised with SAM's red-channel mean and std, zero-padded, sampled bilinearly at the cell
+        centres, above 0. An object too small for any cell keeps its best one. Returns a (grid, grid) bool."""
+        from PIL import Image
+
         size = self._model.config.vision_config.image_size
         h, w = alpha.shape
-        scale = size / max(h, w)
-        a = torch.from_numpy(alpha).float()[None, None] / 255.0
-        a = F.interpolate(a, size=(int(h * scale + 0.5), int(w * scale + 0.5)), mode="bilinear", align_corners=False)
-        a = F.pad(a, (0, size - a.shape[-1], 0, size - a.shape[-2]))
-        return F.adaptive_avg_pool2d(a, (grid, grid))[0, 0]
+        new_h, new_w = self._processor._get_preprocess_shape((h, w), size)
+        mask = Image.fromarray(np.where(alpha > 0, 255, 0).astype(np.uint8)).resize((new_w, new_h), Image.BILINEAR)
+        mean, std = 255 * self._processor.image_mean[0], 255 * self._processor.image_std[0]
+        resized = torch.from_numpy(np.asarray(mask, np.float32))
+        m = F.pad((resized - mean) / std, (0, size - new_w, 0, size - new_h))[None, None]
+        cells = F.interpolate(m, size=(grid, grid), mode="bilinear", align_corners=False)[0, 0] > 0
+        if not cells.any():  # no cell centre on the object: keep the cell it covers most
+            cover = F.adaptive_avg_pool2d(F.pad(resized, (0, size - new_w, 0, size - new_h))[None], grid)[0]
+            cells = torch.zeros_like(cells).flatten()
+            cells[int(cover.argmax())] = True
+            cells = cells.reshape(grid, grid)
+        return cells
 
-    def _fit_weights(self, feats: torch.Tensor, valid: tuple[int, int], alpha: np.ndarray,
+    def _fit_weights(self, feats: torch.Tensor, valid: tuple[int, int], mask: np.ndarray,
                      embedding: torch.Tensor) -> torch.Tensor:
-        """PerSAM-F training on the reference: positive point at the best location, then fit the mixing."""
-        sim = self._similarity(feats, embedding[None])[0, 0]
-        pos = self._extreme_points(sim[None], valid_grid=[self._valid_grid(valid, sim.shape[-1])])[0][0]
-        with torch.no_grad():
-            out = self._model(image_embeddings=feats, input_points=pos[None, None, None].to(feats),
-                              input_labels=torch.ones(1, 1, 1, dtype=torch.long, device=feats.device),
-                              multimask_output=True)
-        logits = out.pred_masks[0, 0]  # (3, h, w) low-resolution
-        low = logits.shape[-1]
-        target = (self._grid_cover(alpha, low) >= 0.5).float()
-        vh, vw = self._valid_grid(valid, low)
-        return fit_mask_weights(logits[:, :vh, :vw], target[:vh, :vw], self.cfg.iterations, self.cfg.lr)
+        """PerSAM-F training on the reference at its own resolution: positive point at the best pixel of its own
+        similarity map, three masks upsampled to the reference, their mixing fitted to its mask."""
+        hw = mask.shape
+        sim = self._image_map(self._similarity(feats, embedding[None])[0], valid, hw)[0]
+        pos = self._extreme(sim, largest=True)
+        logits, _ = self._decode(feats, self._to_input([pos], valid, hw), [1], multimask=True)
+        high = self._postprocess(logits, valid, hw)  # (3, H, W)
+        target = torch.from_numpy(np.ascontiguousarray(mask)).to(high)
+        return fit_mask_weights(high, target, self.cfg.iterations, self.cfg.lr)
 
     # ------------------------------------------------------------------ shared steps
     def _encode(self, images: list[np.ndarray]) -> tuple[torch.Tensor, list[tuple[int, int]]]:
@@ -184,104 +195,110 @@ class PerSamMatcher(CropMatcher):
             feats = self._model.get_image_embeddings(inputs["pixel_values"].to(self.cfg.device))
         return feats, [tuple(int(v) for v in s) for s in inputs["reshaped_input_sizes"]]
 
-    def _valid_grid(self, valid: tuple[int, int], grid: int) -> tuple[int, int]:
-        size = self._model.config.vision_config.image_size
-        return max(1, int(np.ceil(valid[0] * grid / size))), max(1, int(np.ceil(valid[1] * grid / size)))
-
     @staticmethod
     def _similarity(feats: torch.Tensor, embeddings: torch.Tensor) -> torch.Tensor:
         """Cosine (B, R, g, g) of every location with each of R target embeddings."""
         return torch.einsum("bchw,rc->brhw", F.normalize(feats, dim=1), F.normalize(embeddings, dim=-1))
 
-    def _extreme_points(self, sim: torch.Tensor, valid_grid: list[tuple[int, int]]) -> list[tuple[torch.Tensor, ...]]:
-        """Per map (B, g, g): the argmax and argmin locations inside the unpadded area, in model input pixels."""
-        cell = self._model.config.vision_config.image_size / sim.shape[-1]
-        out = []
-        for s, (vh, vw) in zip(sim, valid_grid):
-            area = s[:vh, :vw]
-            pts = []
-            for flat in (area.argmax(), area.argmin()):
-                i, j = divmod(int(flat), vw)
-                pts.append(torch.tensor([(j + 0.5) * cell, (i + 0.5) * cell]))
-            out.append(tuple(pts))
-        return out
+    def _postprocess(self, maps: torch.Tensor, valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """SAM's mask postprocessing of (N, l, l) maps: to the padded input, unpadded, to the image (N, h, w)."""
+        size = self._model.config.vision_config.image_size
+        x = F.interpolate(maps[None], size=(size, size), mode="bilinear", align_corners=False)
+        return F.interpolate(x[..., :valid[0], :valid[1]], size=hw, mode="bilinear", align_corners=False)[0]
 
-    def _attention_prior(self, sim: torch.Tensor, valid_grid: list[tuple[int, int]]) -> torch.Tensor:
-        """PerSAM's target-guided attention: the standardised similarity through a sigmoid, (B, 1, 1, g*g)."""
-        out = []
-        for s, (vh, vw) in zip(sim, valid_grid):
-            area = s[:vh, :vw]
-            out.append(((s - area.mean()) / area.std().clamp_min(1e-6)).sigmoid().flatten())
-        return torch.stack(out)[:, None, None]
-
-    def _decode(self, feats: torch.Tensor, points: torch.Tensor, *, multimask: bool, **prompts) -> tuple:
-        out = self._model(image_embeddings=feats, input_points=points,
-                          input_labels=torch.tensor([[[1, 0]]], device=feats.device).expand(len(feats), 1, 2),
-                          multimask_output=multimask, **prompts)
-        return out.pred_masks[:, 0], out.iou_scores[:, 0]  # (B, M, h, w), (B, M)
-
-    def _first_mask(self, feats: torch.Tensor, points: torch.Tensor, sim: torch.Tensor, best: torch.Tensor,
-                    valid_grid: list[tuple[int, int]]) -> torch.Tensor:
-        """PerSAM: one mask with target-guided attention and the target embedding as a semantic prompt."""
-        logits, _ = self._decode(feats, points, multimask=False,
-                                 attention_similarity=self._attention_prior(sim, valid_grid),
-                                 target_embedding=self._embeddings[best][:, None, None])
-        return logits[:, 0]
+    def _image_map(self, sim: torch.Tensor, valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """Personalize-SAM's similarity map: (R, g, g) upsampled x4, then postprocessed to the image (R, h, w)."""
+        return self._postprocess(F.interpolate(sim[None], scale_factor=4, mode="bilinear", align_corners=False)[0],
+                                 valid, hw)
 
     @staticmethod
-    def _pick(logits: torch.Tensor, iou: torch.Tensor) -> torch.Tensor:
-        return logits[torch.arange(len(logits)), iou.argmax(dim=1)]
+    def _extreme(sim: torch.Tensor, largest: bool) -> tuple[int, int]:
+        """(x, y) of the map's maximum (or minimum), first in row-major order, as ``topk`` picks it."""
+        flat = int(sim.flatten().topk(1, largest=largest).indices)
+        return flat % sim.shape[1], flat // sim.shape[1]
 
-    def _boxes(self, logits: torch.Tensor, points: torch.Tensor, valid: list[tuple[int, int]]) -> torch.Tensor:
-        """Bounding boxes (B, 1, 4) of the masks in model input pixels; the positive point's cell when empty."""
-        size = self._model.config.vision_config.image_size
-        up = F.interpolate(logits[:, None], size=(size, size), mode="bilinear", align_corners=False)[:, 0] > 0
-        cell = self._model.config.vision_config.patch_size
-        boxes = []
-        for m, (vh, vw), p in zip(up, valid, points[:, 0, 0]):
-            ys, xs = torch.nonzero(m[:vh, :vw], as_tuple=True)
-            if len(xs):
-                boxes.append(torch.stack([xs.min(), ys.min(), xs.max(), ys.max()]).float())
-            else:
-                boxes.append(torch.cat([p - cell / 2, p + cell / 2]))
-        return torch.stack(boxes)[:, None]
+    @staticmethod
+    def _to_input(points: list[tuple[float, float]], valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """Image pixels -> model input pixels, as SAM's ResizeLongestSide.apply_coords: (n, 2)."""
+        scale = torch.tensor([valid[1] / hw[1], valid[0] / hw[0]])
+        return torch.tensor(points, dtype=torch.float32) * scale
+
+    def _decode(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], *, multimask: bool,
+                **prompts) -> tuple[torch.Tensor, torch.Tensor]:
+        """One SAM decoding for one image: mask logits (M, l, l) and predicted IoUs (M,)."""
+        with torch.no_grad():
+            out = self._model(image_embeddings=feats, input_points=points[None, None].to(feats),
+                              input_labels=torch.tensor([[labels]], device=feats.device),
+                              multimask_output=multimask, **prompts)
+        return out.pred_masks[0, 0], out.iou_scores[0, 0]
+
+    def _box(self, mask: torch.Tensor, positive: tuple[int, int], valid: tuple[int, int]) -> torch.Tensor:
+        """The box (1, 1, 4) of an image-resolution mask in model input pixels (the positive point's cell if empty)."""
+        ys, xs = torch.nonzero(mask, as_tuple=True)
+        hw = mask.shape
+        if len(xs):
+            corners = [(int(xs.min()), int(ys.min())), (int(xs.max()), int(ys.max()))]
+            return self._to_input(corners, valid, hw).reshape(1, 1, 4)
+        cell = self._model.config.vision_config.patch_size / 2
+        x, y = self._to_input([positive], valid, hw)[0].tolist()
+        return torch.tensor([[[x - cell, y - cell, x + cell, y + cell]]])
+
+    def _refine(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], logits: torch.Tensor,
+                box: torch.Tensor | None) -> torch.Tensor:
+        """One cascaded refinement: the previous logits as mask input (and a box), three masks, best predicted IoU."""
+        extra = {"input_boxes": box.to(feats)} if box is not None else {}
+        masks, iou = self._decode(feats, points, labels, multimask=True, input_masks=logits[None, None], **extra)
+        return masks[int(iou.argmax())]
 
     # ------------------------------------------------------------------ images
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
         feats, valid = self._encode(crops)
-        grid = feats.shape[-1]
-        valid_grid = [self._valid_grid(v, grid) for v in valid]
-        sim_all = self._similarity(feats, self._embeddings)  # (B, R, g, g)
-        ref_max = torch.stack([s[:, :vh, :vw].amax(dim=(1, 2)) for s, (vh, vw) in zip(sim_all, valid_grid)])
-        best = ref_max.argmax(dim=1)
-        sim = sim_all[torch.arange(len(crops)), best]
-        points = torch.stack([torch.stack(p) for p in self._extreme_points(sim, valid_grid)])[:, None].to(feats)
-        with torch.no_grad():
-            logits = self._first_mask(feats, points, sim, best, valid_grid)
-            if self.cfg.refine:
-                logits = self._pick(*self._decode(feats, points, multimask=True, input_masks=logits[:, None]))
-                logits = self._pick(*self._decode(feats, points, multimask=True, input_masks=logits[:, None],
-                                                  input_boxes=self._boxes(logits, points, valid)))
-        heat = sim_all.amax(dim=1).cpu().numpy()
-        return [self._result(crop, lg, v, pt, float(score), hm)
-                for crop, lg, v, pt, score, hm in zip(crops, logits, valid, points[:, 0, 0], ref_max.amax(1), heat)]
+        sims = self._similarity(feats, self._embeddings)  # (B, R, g, g)
+        return [self._match_one(crop, feats[i:i + 1], sims[i], valid[i]) for i, crop in enumerate(crops)]
 
-    def _result(self, crop: np.ndarray, logits: torch.Tensor, valid: tuple[int, int], positive: torch.Tensor,
-                score: float, heatmap: np.ndarray) -> MatchResult:
-        """The mask at crop resolution, stored as pixels on a stride grid (the positive point when empty)."""
-        size = self._model.config.vision_config.image_size
+    def _match_one(self, crop: np.ndarray, feats: torch.Tensor, sim: torch.Tensor,
+                   valid: tuple[int, int]) -> MatchResult:
+        hw = crop.shape[:2]
+        maps = self._image_map(sim, valid, hw)  # (R, h, w): the map Personalize-SAM takes its points from
+        best = int(maps.flatten(1).amax(1).argmax())
+        positive = self._extreme(maps[best], largest=True)
+        chosen = [positive, self._extreme(maps[best], largest=False)] if self._negative_point else [positive]
+        labels = [1, 0][:len(chosen)]
+        points = self._to_input(chosen, valid, hw)
+        logits = self._first_mask(feats, points, labels, maps[best], best, valid, hw)
+        if self.cfg.refine:
+            logits = self._refinements(feats, points, labels, logits, positive, valid, hw)
+        return self._result(crop, self._postprocess(logits[None], valid, hw)[0] > 0, positive,
+                            float(maps[best][positive[1], positive[0]]), sim.amax(0).cpu().numpy())
+
+    def _first_mask(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], image_sim: torch.Tensor,
+                    best: int, valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """PerSAM: one mask with target-guided attention and the target embedding as a semantic prompt."""
+        grid = feats.shape[-1]
+        standard = (image_sim - image_sim.mean()) / image_sim.std()
+        attention = F.interpolate(standard[None, None], size=(grid, grid), mode="bilinear", align_corners=False)
+        logits, _ = self._decode(feats, points, labels, multimask=False,
+                                 attention_similarity=attention.sigmoid().flatten(2)[:, None],
+                                 target_embedding=self._embeddings[best][None, None, None])
+        return logits[0]
+
+    def _refinements(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], logits: torch.Tensor,
+                     positive: tuple[int, int], valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """PerSAM's two cascaded refinements: mask input only, then mask input and the mask's box."""
+        logits = self._refine(feats, points, labels, logits, None)
+        box = self._box(self._postprocess(logits[None], valid, hw)[0] > 0, positive, valid)
+        return self._refine(feats, points, labels, logits, box)
+
+    def _result(self, crop: np.ndarray, mask: torch.Tensor, positive: tuple[int, int], score: float,
+                heatmap: np.ndarray) -> MatchResult:
+        """The mask's pixels on a stride grid (the positive point when none is inside)."""
         h, w = crop.shape[:2]
-        up = F.interpolate(logits[None, None], size=(size, size), mode="bilinear", align_corners=False)
-        up = F.interpolate(up[..., :valid[0], :valid[1]], size=(h, w), mode="bilinear", align_corners=False)[0, 0]
         s = self.cfg.point_stride
-        ys, xs = np.arange(s // 2, h, s), np.arange(s // 2, w, s)
-        gx, gy = np.meshgrid(xs, ys)
-        inside = (up.cpu().numpy() > 0)[gy, gx]
+        gx, gy = np.meshgrid(np.arange(s // 2, w, s), np.arange(s // 2, h, s))
+        inside = mask.cpu().numpy()[gy, gx]
         pts = np.stack([gx[inside], gy[inside]], 1)
         if not len(pts):
-            x = min(float(positive[0]) * w / valid[1], w - 1)
-            y = min(float(positive[1]) * h / valid[0], h - 1)
-            pts = np.array([[x, y]], np.float32)
+            pts = np.array([positive], np.float32)
         return MatchResult(score=score, points=pts, heatmap=heatmap)
 
 
@@ -292,16 +309,25 @@ class PerSamFMatcher(PerSamMatcher):
     Config = PerSamFConfig
     default_sigma = 0.61
     _fine_tunes = True
+    _negative_point = False
 
     @staticmethod
     def _pool(inside: torch.Tensor) -> torch.Tensor:
         return 0.5 * inside.mean(dim=1) + 0.5 * inside.amax(dim=1)
 
-    def _first_mask(self, feats: torch.Tensor, points: torch.Tensor, sim: torch.Tensor, best: torch.Tensor,
-                    valid_grid: list[tuple[int, int]]) -> torch.Tensor:
-        """PerSAM-F: the three multimask logits mixed with the best reference's learnt weights."""
-        logits, _ = self._decode(feats, points, multimask=True)
-        return (self._mix[best][:, :, None, None] * logits).sum(dim=1)
+    def _first_mask(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], image_sim: torch.Tensor,
+                    best: int, valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """PerSAM-F: the three multimask logits mixed with the best reference's learnt weights (no attention)."""
+        logits, _ = self._decode(feats, points, labels, multimask=True)
+        return (self._mix[best][:, None, None].to(logits) * logits).sum(dim=0)
+
+    def _refinements(self, feats: torch.Tensor, points: torch.Tensor, labels: list[int], logits: torch.Tensor,
+                     positive: tuple[int, int], valid: tuple[int, int], hw: tuple[int, int]) -> torch.Tensor:
+        """PerSAM-F's: the mixed mask's box already feeds the first refinement, its box the second."""
+        for _ in range(2):
+            box = self._box(self._postprocess(logits[None], valid, hw)[0] > 0, positive, valid)
+            logits = self._refine(feats, points, labels, logits, box)
+        return logits
 
 
 def _load_sammodel(source: str):

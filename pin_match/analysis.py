@@ -17,8 +17,8 @@ import pandas as pd
 from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
 from pin_match.labels import frame_labels, scored_frames
-from pin_match.report import side_by_side
 from pin_match.scoretable import ScoreTable
+from pin_match.tables import report_row, side_by_side
 
 
 class AnalysisError(PinMatchError, ValueError):
@@ -31,9 +31,9 @@ class BenchRun:
     frameset: FrameSet
     labels: pd.DataFrame                 # frame_labels(frameset)
     tables: dict[str, ScoreTable]        # by matcher name, in the order of the reports
-    sigmas: dict[str, float]             # the sigma each matcher was reported at (tuned on train)
+    sigmas: dict[str, float]             # the sigma each matcher was reported at (source: its report)
     reports: dict[str, dict]             # reports/<matcher>/metrics.json
-    tuned: dict[str, dict]               # thresholds/<matcher>.json (absent where bench fell back to the default)
+    tuned: dict[str, dict]               # thresholds/<matcher>.json (absent unless bench tuned sigma)
 
     @property
     def matchers(self) -> list[str]:
@@ -48,7 +48,7 @@ class BenchRun:
 
     def table(self) -> pd.DataFrame:
         """The side-by-side table of the reports (rows = matchers), as ``bench`` wrote it."""
-        return side_by_side(list(self.reports.values()))
+        return side_by_side([report_row(r) for r in self.reports.values()])
 
 
 def load_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = None) -> BenchRun:
@@ -66,8 +66,11 @@ def load_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = Non
         if report.get("frameset_fingerprint") != fs.fingerprint:
             raise AnalysisError(f"{path} reports frame-set {report.get('frameset_fingerprint')}, "
                                 f"not {fs.root} ({fs.fingerprint})")
-        tables[name] = ScoreTable.read(root / "scores" / matcher_id / fs.fingerprint)
-        sigmas[name] = float(report["sigma"])  # tuned on train, or the default when tuning failed (sigma_source)
+        folder = root / "scores" / matcher_id / fs.fingerprint
+        if not folder.is_dir():
+            raise AnalysisError(f"{path} reports {matcher_id}, but there is no score table under {folder}")
+        tables[name] = ScoreTable.read(folder)
+        sigmas[name] = float(report["sigma"])  # where it came from: report["sigma_source"]
         threshold_file = root / "thresholds" / f"{name}.json"
         if threshold_file.exists():
             tuned[name] = json.loads(threshold_file.read_text(encoding="utf-8"))

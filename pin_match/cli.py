@@ -15,6 +15,22 @@ from pathlib import Path
 from pin_match.errors import PinMatchError
 from pin_match.registry import parse_overrides
 
+IMPORT_HELP = """Build a frame-set from a PIN recording and the PInNED objects folder.
+
+  RECORDING/episodes.json[.gz]                {"episodes": [{episode_id, goals: [{object_id, object_category}],
+                                                distractors: [{object_id, object_category}, ...],
+                                                scene_id (optional), split (optional: train | val)}]}
+  RECORDING/<episode_id>/rgb/<step>.png|.jpg  RGB frames named by their integer step
+  RECORDING/<episode_id>/semantic/<step>.npy  PIN labels: 100000 target, 100001 same-category, 100002 other
+  RECORDING/<episode_id>/depth/<step>.npy     depth in metres (optional)
+  OBJECTS/objects_images/<id>/<id>_0.png      frontal view (RGBA), <id>_1.png back, <id>_2.png top,
+                                              for the goal and every distractor of every episode
+  OBJECTS/objects_descriptions.json           {<id>: [3 descriptions]} for the same objects
+
+An episode without a split key gets --split; each object takes the split of the episodes
+that use it (an object used by train and val episodes is an error).
+"""
+
 
 def _cmd_synth(a: argparse.Namespace) -> None:
     from pin_match.synth import generate
@@ -26,10 +42,18 @@ def _cmd_synth(a: argparse.Namespace) -> None:
     print(f"wrote {fs}")
 
 
+def _cmd_realset(a: argparse.Namespace) -> None:
+    from pin_match.realset import build
+
+    fs = build(a.out, seed=a.seed, overwrite=a.overwrite)
+    print(f"wrote {fs}")
+
+
 def _cmd_import(a: argparse.Namespace) -> None:
     from pin_match.importer import import_recording
 
-    fs = import_recording(a.recording, a.objects, a.out, split=a.split, overwrite=a.overwrite)
+    fs = import_recording(a.recording, a.objects, a.out, split=a.split, image_format=a.image_format,
+                          overwrite=a.overwrite)
     print(f"wrote {fs}")
 
 
@@ -38,8 +62,15 @@ def _cmd_score(a: argparse.Namespace) -> None:
 
     from pin_match.scoring import read_meta, score_to_file
 
-    path = score_to_file(a.frameset, a.matcher, overrides=parse_overrides(a.cfg), weights=a.weights, split=a.split,
-                         out=a.out, batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
+    kwargs = dict(overrides=parse_overrides(a.cfg), weights=a.weights, split=a.split, out=a.out,
+                  batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
+    if a.scheduler:
+        from pin_match.distributed import connect
+
+        with connect(a.scheduler, workers=a.workers, timeout=a.scheduler_timeout) as client:
+            path = score_to_file(a.frameset, a.matcher, client=client, **kwargs)
+    else:
+        path = score_to_file(a.frameset, a.matcher, **kwargs)
     s = pd.read_parquet(path, columns=["score"]).score
     summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
     print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
@@ -65,51 +96,82 @@ def _add_eval_commands(sub: argparse._SubParsersAction) -> None:
     cli_eval.add_commands(sub)
 
 
+def _add_train_commands(sub: argparse._SubParsersAction) -> None:
+    from pin_match import cli_train
+
+    cli_train.add_commands(sub)
+
+
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set")
-    s.add_argument("out", type=Path)
-    s.add_argument("--seed", type=int)
-    s.add_argument("--episodes", type=int)
-    s.add_argument("--objects-per-category", type=int)
-    s.add_argument("--frames-per-episode", type=int)
-    s.add_argument("--workers", type=int)
-    s.add_argument("--overwrite", action="store_true")
+    s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set (docs/synthetic.md)")
+    s.add_argument("out", type=Path, help="frame-set folder to create")
+    s.add_argument("--seed", type=int, help="generator seed (default 0); same seed and sizes, same bytes")
+    s.add_argument("--episodes", type=int, help="episodes, half train and half val (default 24)")
+    s.add_argument("--objects-per-category", type=int, help="object instances per category (default 10)")
+    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode (default 32)")
+    s.add_argument("--workers", type=int, help="rendering processes (default: all cores); output is the same")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_synth)
 
-    s = sub.add_parser("import", help="build a frame-set from a PIN recording folder")
-    s.add_argument("recording", type=Path)
-    s.add_argument("--objects", type=Path, required=True, help="PInNED objects folder")
-    s.add_argument("--out", type=Path, required=True)
-    s.add_argument("--split", default="val")
-    s.add_argument("--overwrite", action="store_true")
+    s = sub.add_parser("import", help="build a frame-set from a PIN recording folder (layout: docs/frameset.md)",
+                       description=IMPORT_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("recording", type=Path, help="recording folder: episodes.json[.gz] and one folder per episode")
+    s.add_argument("--objects", type=Path, required=True,
+                   help="PInNED objects folder: objects_images/<id>/<id>_0|1|2.png and objects_descriptions.json, "
+                        "for the goal AND every distractor")
+    s.add_argument("--out", type=Path, required=True, help="frame-set folder to create")
+    s.add_argument("--split", default="val",
+                   help="split of episodes without a 'split' key (default val); objects take their episodes' split")
+    s.add_argument("--image-format", choices=("source", "png", "jpeg"), default="source",
+                   help="how frames are stored: 'source' keeps each file's bytes (lossless, default), 'png' "
+                        "re-encodes losslessly, 'jpeg' re-encodes at quality 95 (smaller, lossy)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at --out")
     s.set_defaults(func=_cmd_import)
 
+    s = sub.add_parser("realset", help="build the small real-photo test frame-set (needs scikit-image; offline)",
+                       description="Cut objects out of the real photos bundled in scikit-image's wheel and paste "
+                                   "them at other scales, rotations and backgrounds: 6 targets, each with a "
+                                   "same-category look-alike, 12 frames per target, exact instance masks. "
+                                   "Needs scikit-image (pip install 'pin-match[test]'). Layout: docs/frameset.md.")
+    s.add_argument("out", type=Path, help="frame-set folder to create")
+    s.add_argument("--seed", type=int, default=0, help="placement seed (default 0); the same seed gives the same bytes")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
+    s.set_defaults(func=_cmd_realset)
+
     s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
-    s.add_argument("frameset", type=Path)
-    s.add_argument("--matcher", required=True)
+    s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")
+    s.add_argument("--matcher", required=True, help="registered matcher name (`pin-match list`)")
     s.add_argument("--cfg", action="append", metavar="KEY=VALUE", help="config override (repeatable)")
     s.add_argument("--weights", help="local weights file or folder")
-    s.add_argument("--split")
-    s.add_argument("--out", type=Path, default=Path("pin_match_runs/scores"))
-    s.add_argument("--batch-size", type=int, default=8)
-    s.add_argument("--shard", help="i/n: score a deterministic part")
-    s.add_argument("--workers", type=int)
-    s.add_argument("--quiet", action="store_true")
+    s.add_argument("--split", help="score only this split (default: every frame)")
+    s.add_argument("--out", type=Path, default=Path("pin_match_runs/scores"),
+                   help="score cache; the table goes to <out>/<matcher@hash>/<fingerprint>/ and its path is printed")
+    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
+    s.add_argument("--shard", help="i/n: score a deterministic part (join the parts with `pin-match merge`)")
+    s.add_argument("--workers", type=int, help="threads decoding and scoring frames (default up to 2); "
+                                                    "with --scheduler local, worker processes")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--scheduler", metavar="local|ADDRESS",
+                   help="score on Dask distributed: 'local' starts --workers worker processes here; else a "
+                        "scheduler address (tcp://host:8786) or scheduler JSON file; same cache and table")
+    s.add_argument("--scheduler-timeout", type=float, default=30.0, metavar="SECONDS",
+                   help="give up on an unreachable --scheduler after this long (default 30)")
     s.set_defaults(func=_cmd_score)
 
     s = sub.add_parser("merge", help="join shard score tables")
-    s.add_argument("parts", nargs="+", type=Path)
-    s.add_argument("--out", type=Path, required=True)
+    s.add_argument("parts", nargs="+", type=Path, help="shard tables of one matcher and frame-set")
+    s.add_argument("--out", type=Path, required=True, help="merged table to write (parquet)")
     s.set_defaults(func=_cmd_merge)
 
-    s = sub.add_parser("list", help="registered matchers")
-    s.add_argument("pattern", nargs="?", default="*")
+    s = sub.add_parser("list", help="registered matchers, their modality, default sigma and weights")
+    s.add_argument("pattern", nargs="?", default="*", help="shell-style name pattern (default: all)")
     s.set_defaults(func=_cmd_list)
 
     _add_eval_commands(sub)
+    _add_train_commands(sub)
     return p
 
 

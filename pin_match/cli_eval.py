@@ -1,43 +1,64 @@
-"""The evaluation half of the CLI: tune, report, similarity, bench, demo (no model needed except similarity)."""
+"""The evaluation half of the CLI: tune, report, similarity, bench, demo (no model needed except similarity).
+
+``tune`` and ``report`` take a score table by path or find it in the score cache from
+``--frameset`` and ``--matcher`` (the same ``--cfg`` / ``--weights`` as ``score``). Every
+command prints the sigma it used and where it came from.
+"""
 
 from __future__ import annotations
 
 import argparse
 from pathlib import Path
 
+from pin_match.errors import PinMatchError
 from pin_match.frameset import FrameSet
 from pin_match.scoretable import ScoreTable
 
+SCORE_CACHE = Path("pin_match_runs") / "scores"
 
-def _load_fs_for(table: ScoreTable, frameset: Path) -> FrameSet:
-    fs = FrameSet.load(frameset)
-    if fs.fingerprint != table.meta.get("frameset_fingerprint"):
-        raise ValueError(f"{frameset} has fingerprint {fs.fingerprint}, but the scores of {table.matcher_id} were "
-                         f"computed on {table.meta.get('frameset_fingerprint')}")
-    return fs
+
+class UsageError(PinMatchError, ValueError):
+    """Arguments that argparse cannot check alone."""
+
+
+def _table(a: argparse.Namespace, fs: FrameSet) -> ScoreTable:
+    """The table named by path, else the one the score cache holds for --matcher on --frameset."""
+    from pin_match.locate import find_score_table
+    from pin_match.registry import parse_overrides
+
+    if len(a.scores) > 1:
+        raise UsageError(f"{len(a.scores)} score tables given ({', '.join(map(str, a.scores[:3]))}...): a shell glob "
+                         "matched several; name one, or use --matcher NAME with --frameset")
+    if bool(a.scores) == (a.matcher is not None):
+        raise UsageError("name the score table: its path, or --matcher NAME (found in --cache for --frameset)")
+    if a.scores:
+        return ScoreTable.read(a.scores[0])
+    overrides = parse_overrides(a.cfg)
+    if a.weights:
+        overrides["weights"] = a.weights
+    return ScoreTable.read(find_score_table(a.cache, fs, a.matcher, overrides))
 
 
 def _cmd_tune(a: argparse.Namespace) -> None:
-    from pin_match.labels import frame_labels
     from pin_match.tuning import default_threshold_path, tune, write_thresholds
 
-    table = ScoreTable.read(a.scores)
-    fs = _load_fs_for(table, a.frameset)
-    result = tune(table, frame_labels(fs), objective=a.objective, split=a.split)
+    fs = FrameSet.load(a.frameset)
+    table = _table(a, fs)
+    result = tune(table, fs, objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
-    print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} ({a.objective} on {a.split} = "
+    print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
           f"{result['objective_value']:.4g}) -> {path}")
 
 
 def _cmd_report(a: argparse.Namespace) -> None:
     from pin_match.report import report
 
-    table = ScoreTable.read(a.scores)
-    fs = _load_fs_for(table, a.frameset)
-    out = a.out or Path(a.scores).parent / "report"
+    fs = FrameSet.load(a.frameset)
+    table = _table(a, fs)
+    out = a.out or Path("pin_match_runs") / "reports" / table.matcher_id / fs.fingerprint / str(a.split)
     result = report(table, fs, out, sigma=a.threshold, thresholds=a.thresholds, split=a.split, n_boot=a.bootstrap)
     m = result["metrics"]
-    print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_source']}): "
+    print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "
           f"%Match {_fmt(m.get('match_pct'))}  TM {_fmt(m.get('tm_pct'))}  CM {_fmt(m.get('cm_pct'))}  "
           f"NM {_fmt(m.get('nm_pct'))} -> {out}")
 
@@ -64,69 +85,96 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.bench import bench
-    from pin_match.report import markdown_table
+    from pin_match.tables import markdown_table
 
-    joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, batch_size=a.batch_size,
-                     workers=a.workers, progress=not a.quiet)
+    joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
+                     batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
     print(markdown_table(joint))
     print(f"-> {a.out}")
 
 
 def _cmd_demo(a: argparse.Namespace) -> None:
     from pin_match.bench import OFFLINE_MATCHERS, demo
-    from pin_match.report import markdown_table
+    from pin_match.tables import markdown_table
 
     joint, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, seed=a.seed, workers=a.workers, progress=not a.quiet)
-    print("\nPIN detection metrics on the synthetic val split (sigma tuned on train):\n")
+    print("\nPIN detection metrics on the synthetic val split (column 'sigma from': where each sigma came from):\n")
     print(markdown_table(joint))
     print(f"\nreports, plots, thresholds and score tables: {out}")
+
+
+def _table_arguments(s: argparse.ArgumentParser) -> None:
+    s.add_argument("scores", type=Path, nargs="*",
+                   help="score table (parquet, or its cache folder) printed by `pin-match score`; or use --matcher")
+    s.add_argument("--frameset", type=Path, required=True, help="the frame-set the scores were computed on")
+    s.add_argument("--matcher", help="find the table of this matcher for --frameset in --cache instead of a path")
+    s.add_argument("--cfg", action="append", metavar="KEY=VALUE",
+                   help="with --matcher: the config overrides given to `pin-match score` (repeatable)")
+    s.add_argument("--weights", help="with --matcher: the --weights given to `pin-match score`")
+    s.add_argument("--cache", type=Path, default=SCORE_CACHE,
+                   help=f"with --matcher: the score cache (the --out of `pin-match score`; default {SCORE_CACHE})")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
     from pin_match.bench import DEMO_OUT
     from pin_match.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
-    s = sub.add_parser("tune", help="choose sigma on the train split; writes thresholds/<matcher>.json")
-    s.add_argument("scores", type=Path, help="score table (parquet) from pin-match score")
-    s.add_argument("--frameset", type=Path, required=True, help="the frame-set the scores came from")
-    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES))
-    s.add_argument("--split", default="train")
-    s.add_argument("--out", type=Path, help="thresholds file (default thresholds/<matcher>.json)")
+    objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
+    s = sub.add_parser("tune", help="choose sigma on one split (train by default); writes thresholds/<matcher>.json",
+                       description="Choose a matcher's sigma on one split of the frame-set it was scored on.")
+    _table_arguments(s)
+    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    s.add_argument("--split", default="train",
+                   help="split to tune on (default train; tuning on the split you report is optimistic)")
+    s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
     s.set_defaults(func=_cmd_tune)
 
-    s = sub.add_parser("report", help="metrics, tables and plots of a score table at one sigma")
-    s.add_argument("scores", type=Path)
-    s.add_argument("--frameset", type=Path, required=True)
+    s = sub.add_parser("report", help="metrics, tables and plots of a score table at one sigma",
+                       description="Metrics, tables and plots of one split at one sigma. Sigma: --threshold, else "
+                                   "--thresholds, else the matcher's default; every output says which.")
+    _table_arguments(s)
     g = s.add_mutually_exclusive_group()
-    g.add_argument("--threshold", type=float)
-    g.add_argument("--thresholds", type=Path, help="a tuned thresholds file or thresholds/paper.json")
-    s.add_argument("--split", default="val")
-    s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the CIs")
-    s.add_argument("--out", type=Path)
+    g.add_argument("--threshold", type=float, metavar="SIGMA", help="report at this sigma")
+    g.add_argument("--thresholds", metavar="FILE|paper",
+                   help="a thresholds file written by `pin-match tune`, or 'paper' for thresholds/paper.json")
+    s.add_argument("--split", default="val", help="split to report (default val; 'all' for every frame)")
+    s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
+    s.add_argument("--out", type=Path,
+                   help="report folder (default pin_match_runs/reports/<matcher@hash>/<fingerprint>/<split>)")
     s.set_defaults(func=_cmd_report)
 
     s = sub.add_parser("similarity", help="intra/inter-category similarity of frontal references")
-    s.add_argument("frameset", type=Path)
-    s.add_argument("--matcher", required=True)
-    s.add_argument("--cfg", action="append", metavar="KEY=VALUE")
-    s.add_argument("--weights")
-    s.add_argument("--split", default="val")
-    s.add_argument("--out", type=Path)
+    s.add_argument("frameset", type=Path, help="frame-set whose objects are compared")
+    s.add_argument("--matcher", required=True, help="registered matcher whose embedding is used")
+    s.add_argument("--cfg", action="append", metavar="KEY=VALUE", help="config override (repeatable)")
+    s.add_argument("--weights", help="local weights file or folder")
+    s.add_argument("--split", default="val", help="objects of this split (default val; 'all' for every object)")
+    s.add_argument("--out", type=Path, help="output folder (default pin_match_runs/similarity/<matcher@hash>)")
     s.set_defaults(func=_cmd_similarity)
 
-    for name, helptext in (("bench", "score, tune on train and report on val for several matchers"),
-                           ("demo", "the whole job on the synthetic default frame-set (generated if absent)")):
-        s = sub.add_parser(name, help=helptext)
-        if name == "bench":
-            s.add_argument("frameset", type=Path)
-            s.add_argument("--matcher", action="append", required=True)
-            s.add_argument("--out", type=Path, default=Path("pin_match_runs") / "bench")
-            s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES))
-            s.add_argument("--batch-size", type=int, default=8)
-        else:
-            s.add_argument("--matcher", action="append")
-            s.add_argument("--out", type=Path, default=DEMO_OUT)
-            s.add_argument("--seed", type=int, default=0)
-        s.add_argument("--workers", type=int)
-        s.add_argument("--quiet", action="store_true")
-        s.set_defaults(func=_cmd_bench if name == "bench" else _cmd_demo)
+    s = sub.add_parser("bench", help="score, choose sigma (tuned on train) and report val for several matchers")
+    s.add_argument("frameset", type=Path, help="frame-set to score (needs a val split)")
+    s.add_argument("--matcher", action="append", required=True, help="matcher to include (repeatable)")
+    s.add_argument("--out", type=Path, default=Path("pin_match_runs") / "bench",
+                   help="folder of scores, thresholds, reports, table.md/.tex/.csv (default pin_match_runs/bench)")
+    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    s.add_argument("--sigma-from", default="train", metavar="SPLIT|default|paper",
+                   help="tune sigma on this split (default train), or use each matcher's 'default' or the 'paper' "
+                        "sigma; the tables say which")
+    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
+    _run_arguments(s)
+    s.set_defaults(func=_cmd_bench)
+
+    s = sub.add_parser("demo", help="the whole job on the synthetic default frame-set (generated if absent)")
+    s.add_argument("--matcher", action="append",
+                   help="matcher to include (repeatable; default sift, color, effnet, xfeat)")
+    s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
+    s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")
+    _run_arguments(s)
+    s.set_defaults(func=_cmd_demo)
+
+
+def _run_arguments(s: argparse.ArgumentParser) -> None:
+    s.add_argument("--workers", type=int, help="worker processes/threads (default: up to 2 for scoring, all cores "
+                                               "for rendering)")
+    s.add_argument("--quiet", action="store_true", help="no progress bars")

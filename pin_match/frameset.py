@@ -215,9 +215,12 @@ def _read_json(path: Path) -> dict:
     if not path.exists():
         raise FrameSetError(f"missing file {path}")
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        data = json.loads(path.read_text(encoding="utf-8"))
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise FrameSetError(f"{path} is not valid JSON: {exc}") from exc
+    if not isinstance(data, dict):
+        raise FrameSetError(f"{path} must hold a JSON object, not {type(data).__name__}")
+    return data
 
 
 def _read_table(path: Path, required: list[str]) -> pd.DataFrame:
@@ -264,12 +267,14 @@ def _episodes_table(root: Path, records: list[dict], objects: pd.DataFrame) -> p
     category = dict(zip(objects.object_id, objects.category))
     rows = []
     for rec in records:
+        if not isinstance(rec, dict):
+            raise FrameSetError(f"{root / EPISODES}: an episode must be a JSON object, got {str(rec)[:60]!r}")
         try:
             episode_id = str(rec["episode_id"])
             target_id = str(rec["goals"][0]["object_id"])
             distractors = [str(d["object_id"]) for d in rec.get("distractors", [])]
             split, scene = str(rec["split"]), str(rec.get("scene_id", ""))
-        except (KeyError, IndexError, TypeError) as exc:
+        except (KeyError, IndexError, TypeError, AttributeError) as exc:
             raise FrameSetError(f"{root / EPISODES}: malformed episode {rec.get('episode_id', rec)!r}: "
                                 f"missing {exc}") from exc
         for object_id in [target_id, *distractors]:
@@ -286,7 +291,19 @@ def _episodes_table(root: Path, records: list[dict], objects: pd.DataFrame) -> p
     return df
 
 
+def _check_types(path: Path, df: pd.DataFrame, text: list[str], integers: list[str]) -> None:
+    """Wrong-typed cells are refused here, naming the column, not met later as a library's traceback."""
+    for col in text:
+        bad = df[~df[col].map(lambda v: isinstance(v, str))]
+        if len(bad):
+            raise FrameSetError(f"{path}: column {col!r} must hold text, row {bad.index[0]} holds {bad.iloc[0][col]!r}")
+    for col in integers:
+        if len(df) and not pd.api.types.is_integer_dtype(df[col]):
+            raise FrameSetError(f"{path}: column {col!r} must hold integers, found {df[col].dtype}")
+
+
 def _check_frames(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> None:
+    _check_types(root / FRAMES, frames, ["frame_id", "episode_id", "image", "mask"], ["step"])
     unknown = frames[~frames.episode_id.isin(episodes.episode_id)]
     if len(unknown):
         raise FrameSetError(f"{root / FRAMES}: frame {unknown.iloc[0].frame_id!r} belongs to unknown episode id "
@@ -304,6 +321,7 @@ def _check_frames(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> N
 
 
 def _check_visibility(root: Path, vis: pd.DataFrame, frames: pd.DataFrame, objects: pd.DataFrame) -> None:
+    _check_types(root / VISIBILITY, vis, ["frame_id", "role"], ["mask_value", "pixels", "x0", "y0", "x1", "y1"])
     unknown = vis[~vis.frame_id.isin(frames.frame_id)]
     if len(unknown):
         raise FrameSetError(f"{root / VISIBILITY} refers to unknown frame id {unknown.iloc[0].frame_id!r}")

@@ -54,13 +54,14 @@ def frame_id_for(episode_id: str, step: int) -> str:
 
 def encode_frame(root: str | Path, episode_id: str, step: int, image: np.ndarray, mask: np.ndarray,
                  legend: Mapping[int, tuple[str | None, str]], depth: np.ndarray | None = None,
-                 image_ext: str = ".jpg") -> FrameRecord:
+                 image_ext: str = ".jpg", image_bytes: bytes | None = None) -> FrameRecord:
     """Write one frame's image, instance mask and depth under ``root``; derive its visibility rows.
 
     ``mask`` holds per-pixel values (0 = background); ``legend`` maps each value to
     (object id or None when the recording cannot tell instances apart, role). Depth is in
     metres and stored in millimetres; mean depths are computed from the stored values so
-    the table agrees with the file exactly.
+    the table agrees with the file exactly. ``image_bytes``, when given, are the already
+    encoded file of ``image`` (an importer keeping a recording's own bytes) and are stored as is.
     """
     root = Path(root)
     frame_id = frame_id_for(episode_id, step)
@@ -73,7 +74,10 @@ def encode_frame(root: str | Path, episode_id: str, step: int, image: np.ndarray
     rel_image = f"frames/{episode_id}/{step:04d}{image_ext}"
     rel_mask = f"masks/{episode_id}/{step:04d}.png"
     params = [1, 95] if image_ext in (".jpg", ".jpeg") else []  # cv2.IMWRITE_JPEG_QUALITY = 1
-    atomic.write_image(root / rel_image, image, params)
+    if image_bytes is None:
+        atomic.write_image(root / rel_image, image, params)
+    else:
+        atomic.write_bytes(root / rel_image, image_bytes)
     mask16 = mask.astype(np.uint16)
     atomic.write_image(root / rel_mask, mask16)
     row = dict(frame_id=frame_id, episode_id=episode_id, step=int(step), image=rel_image, mask=rel_mask,
@@ -121,7 +125,7 @@ class FrameSetWriter:
                  provenance: dict | None = None, image_ext: str = ".jpg") -> None:
         self.root = Path(root)
         if self.root.exists() and not overwrite:
-            raise FrameSetError(f"{self.root} already exists (pass overwrite=True to replace it)")
+            raise FrameSetError(f"{self.root} already exists: pass --overwrite (overwrite=True) to replace it")
         try:
             self.root.parent.mkdir(parents=True, exist_ok=True)
             self.staging = Path(tempfile.mkdtemp(prefix=f".{self.root.name}.", suffix=".staging",
@@ -178,10 +182,12 @@ class FrameSetWriter:
         return out
 
     def add_frame(self, episode_id: str, step: int, image: np.ndarray, mask: np.ndarray,
-                  legend: Mapping[int, tuple[str | None, str]], depth: np.ndarray | None = None) -> str:
+                  legend: Mapping[int, tuple[str | None, str]], depth: np.ndarray | None = None, *,
+                  image_ext: str | None = None, image_bytes: bytes | None = None) -> str:
         if episode_id not in self._episodes:
             raise FrameSetError(f"frame of unknown episode id {episode_id!r}")
-        rec = encode_frame(self.staging, episode_id, step, image, mask, legend, depth, self.image_ext)
+        rec = encode_frame(self.staging, episode_id, step, image, mask, legend, depth, image_ext or self.image_ext,
+                           image_bytes)
         self.add_frame_record(rec)
         return rec.frame["frame_id"]
 

@@ -30,14 +30,19 @@ BUILTINS: dict[str, str] = {
     "dinov2": "matchers.patch",
     "clip": "matchers.patch",
     "clip-text": "matchers.patch",
+    "effnet": "matchers.effnet",
     "superglue": "matchers.keypoint",
     "lightglue": "matchers.keypoint",
     "ieve": "matchers.keypoint",
+    "disk-lightglue": "matchers.glue",
+    "aliked-lightglue": "matchers.glue",
+    "xfeat": "matchers.glue",
     "clip-grad": "matchers.clip_grad",
     "owl": "matchers.owl",
     "owl-image": "matchers.owl",
     "persam": "matchers.persam",
     "persam-f": "matchers.persam",
+    "learned": "matchers.learned",
 }
 
 _REGISTRY: dict[str, type[Matcher]] = {}

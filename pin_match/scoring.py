@@ -6,6 +6,10 @@ prepared once, its frames batched) and each episode's rows land in their own chu
 written atomically, so a killed run resumes where it stopped, two processes can share a
 cache, and the final table is the concatenation of the chunks in episode order: the
 same bytes whether the run was interrupted or not.
+
+The episodes run either here (threads decode ahead of the matcher) or, given a Dask
+``client``, as one task each on a cluster (``pin_match.distributed``); both write the same
+chunk files and end in the same ``_assemble``, so either path resumes the other's run.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ from pin_match.scoretable import COLUMNS, META_KEY, ScoreTable, ScoreTableError
 
 DEFAULT_OUT = Path("pin_match_runs") / "scores"
 LOCK_STALE_S = 600.0
+LOCK_EMPTY_S = 5.0  # a lock still without a pid after this long was left by a process killed while taking it
 
 
 @dataclass(frozen=True)
@@ -75,8 +80,12 @@ def score(frameset: FrameSet | str | Path, matcher: Matcher | str, **kwargs) -> 
 def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
                   weights: str | None = None, split: str | None = None, out: str | Path = DEFAULT_OUT,
                   batch_size: int = 8, shard: Shard | str | None = None, workers: int | None = None,
-                  progress: bool = True) -> Path:
-    """Score (or find in the cache) and return the table's path; memory stays flat in the number of frames."""
+                  progress: bool = True, client=None) -> Path:
+    """Score (or find in the cache) and return the table's path; memory stays flat in the number of frames.
+
+    With a ``distributed.Client`` the episodes are scored on its cluster (``workers`` is then unused),
+    into the same cache and the same table bytes.
+    """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(matcher, str):
         overrides = dict(overrides or {})
@@ -94,10 +103,23 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
     meta = table_meta(matcher, fs, split, shard)
     if final.exists() and read_meta(final) == meta:
         return final
-    workers = workers or min(2, os.cpu_count() or 1)
     chunks = atomic.ensure_dir(root / "chunks")
-    with _progress(part, episode_ids, progress, matcher) as bar, \
-            ThreadPoolExecutor(max_workers=max(2, workers)) as pool:
+    with _progress(part, episode_ids, progress, matcher) as bar:
+        if client is not None:
+            from pin_match.distributed import score_episodes
+
+            score_episodes(client, part, matcher, episode_ids, chunks, batch_size, bar)
+        else:
+            _score_here(part, matcher, episode_ids, chunks, batch_size, workers or min(2, os.cpu_count() or 1), bar)
+    _assemble(final, [chunks / f"{e}.parquet" for e in sorted(episode_ids)], meta)
+    return final
+
+
+def _score_here(part: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path, batch_size: int,
+                workers: int, bar) -> None:
+    """Score the episodes without a chunk in this process, taking turns with other processes through lock files."""
+    held: dict[str, str] = {}
+    with ThreadPoolExecutor(max_workers=max(2, workers)) as pool:
         pending = list(episode_ids)
         while pending:
             deferred = []
@@ -110,15 +132,13 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
                     deferred.append(episode_id)
                     continue
                 try:
-                    rows = _score_episode(part, matcher, episode_id, batch_size, pool, workers, bar)
+                    rows = _score_episode(part, matcher, episode_id, batch_size, pool, workers, bar, held)
                     atomic.write_parquet(chunks / f"{episode_id}.parquet", rows)
                 finally:
                     lock.unlink(missing_ok=True)
             if deferred:
                 time.sleep(0.2)
             pending = deferred
-    _assemble(final, [chunks / f"{e}.parquet" for e in sorted(episode_ids)], meta)
-    return final
 
 
 def _assemble(final: Path, chunk_files: list[Path], meta: dict) -> None:
@@ -157,16 +177,22 @@ def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard |
 
 
 def _score_episode(fs: FrameSet, matcher: Matcher, episode_id: str, batch_size: int, pool: ThreadPoolExecutor,
-                   workers: int, bar) -> pd.DataFrame:
+                   workers: int, bar=None, held: dict[str, str] | None = None) -> pd.DataFrame:
+    """One episode's rows. ``held`` remembers the target the matcher is prepared for, so that
+    consecutive episodes of one target (common in PIN) prepare it once; ``bar`` counts frames."""
     ep = fs.episode(episode_id)
     frames = fs.frames[fs.frames.episode_id == episode_id].sort_values("step")
-    matcher.prepare(fs.target(ep.target_object_id))
+    held = {} if held is None else held
+    if held.get("target") != ep.target_object_id:
+        held.pop("target", None)  # a failed prepare leaves nothing held
+        matcher.prepare(fs.target(ep.target_object_id))
+        held["target"] = ep.target_object_id
     ids = list(frames.frame_id)
     batches = [ids[i:i + batch_size] for i in range(0, len(ids), batch_size)]
     results: list[MatchResult] = []
     # decoding runs ahead of matching in the pool, so it overlaps inference
     decoded = [pool.submit(lambda b=b: [fs.image(f) for f in b]) for b in batches[:2]]
-    parallel = getattr(matcher, "parallel_frames", False) and workers > 1
+    parallel = matcher.parallel_frames and workers > 1
     for k in range(len(batches)):
         images = decoded[k].result()
         if k + 2 < len(batches):
@@ -181,7 +207,8 @@ def _score_episode(fs: FrameSet, matcher: Matcher, episode_id: str, batch_size: 
         except MatcherError as exc:
             raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") from exc
         results.extend(out)
-        bar.update(len(images))
+        if bar is not None:
+            bar.update(len(images))
     return pd.DataFrame(dict(
         frame_id=ids, episode_id=episode_id, step=frames.step.to_numpy(np.int64), split=str(ep.split),
         score=np.array([r.score for r in results], np.float64),
@@ -223,12 +250,15 @@ def _try_lock(path: Path) -> Path | None:
 
 def _lock_is_stale(path: Path) -> bool:
     try:
-        pid = int(path.read_text() or "0")
+        text = path.read_text()
         age = time.time() - path.stat().st_mtime
+        pid = int(text or "0")
     except (OSError, ValueError):
         return True
     if age > LOCK_STALE_S:
         return True
+    if pid <= 0:  # its writer is between creating it and writing the pid, or was killed there
+        return age > LOCK_EMPTY_S
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -256,7 +286,11 @@ class _progress:
 
 
 def merge(parts: list[str | Path], out: str | Path) -> ScoreTable:
-    """Join shard tables of one matcher and frame-set into one table, in frame-set episode order."""
+    """Join shard tables of one matcher and frame-set into one table, rows sorted by (episode id, step).
+
+    That is ``canonical_order``, the order every scoring path writes (episode ids sorted as text,
+    not the frame-set's episode order), so a merged table equals an unsharded run's.
+    """
     tables = [ScoreTable.read(p) for p in parts]
     if not tables:
         raise ScoreTableError("merge needs at least one score table")

@@ -63,7 +63,7 @@ def similarity_tables(categories: np.ndarray, cosine: np.ndarray) -> tuple[pd.Da
 
 def write_similarity(table: pd.DataFrame, matrix: pd.DataFrame, out_dir: str | Path, title: str = "") -> list[Path]:
     """similarity.csv, similarity_matrix.csv, similarity.md and a heatmap similarity.png."""
-    from pin_match.report import markdown_table
+    from pin_match.tables import markdown_table
 
     out = Path(out_dir)
     files = [out / n for n in ("similarity.csv", "similarity_matrix.csv", "similarity.md", "similarity.png")]

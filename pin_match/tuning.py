@@ -2,14 +2,13 @@
 
 The whole threshold curve comes from one ``sweep``; an objective scores every candidate
 sigma (every distinct train score) and the best wins, ties going to the highest sigma, the
-most conservative choice. Thresholds files record the frame-set fingerprint, split,
+most conservative choice. ``pin_match.sigma`` reads them back. Thresholds files record the frame-set fingerprint, split,
 objective and the train metrics at sigma, so a reported number can be traced back.
 """
 
 from __future__ import annotations
 
 import datetime as dt
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +18,8 @@ import pandas as pd
 
 from pin_match import atomic
 from pin_match.errors import PinMatchError
-from pin_match.labels import scored_frames
+from pin_match.evaluation import split_frames
+from pin_match.frameset import FrameSet
 from pin_match.metrics import detection_metrics
 from pin_match.scoretable import ScoreTable
 from pin_match.sweep import sweep
@@ -71,14 +71,14 @@ def choose_sigma(table: pd.DataFrame, objective: str, match_floor: float = DEFAU
     return index, float(best)
 
 
-def tune(table: ScoreTable, labels: pd.DataFrame, objective: str = DEFAULT_OBJECTIVE, split: str = "train",
+def tune(table: ScoreTable, fs: FrameSet, objective: str = DEFAULT_OBJECTIVE, split: str = "train",
          match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
-    """Pick sigma for ``table``'s matcher on one split; the result is what ``write_thresholds`` stores."""
-    scored = scored_frames(labels, table)
-    if split not in (None, "all"):
-        scored = scored[scored.split == split]
-    if scored.empty:
-        raise TuningError(f"score table of {table.matcher_id} has no frames of split {split!r}")
+    """Pick sigma for ``table``'s matcher on one split of ``fs``; the result is what ``write_thresholds`` stores.
+
+    The table must have been scored on ``fs``; a split it lacks is an error that says how to go on
+    (another split, an explicit sigma or the paper's).
+    """
+    scored = split_frames(table, fs, split)
     curve = sweep(scored)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
@@ -100,36 +100,3 @@ def default_threshold_path(matcher: str, root: str | Path = THRESHOLDS_DIR) -> P
 def write_thresholds(result: dict, path: str | Path) -> Path:
     atomic.write_json(path, result)
     return Path(path)
-
-
-def load_threshold(path: str | Path, matcher_name: str) -> float:
-    """Sigma for a matcher from a tuned file (``{"matcher", "sigma", ...}``) or a table of several.
-
-    The table form is ``thresholds/paper.json``: ``{"source": ..., "thresholds": {name: {"sigma": x}}}``.
-    ``matcher_name`` may be a registry name or a full id (``name@hash``).
-    """
-    path = Path(path)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise TuningError(f"no thresholds file {path}") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise TuningError(f"{path} is not valid JSON: {exc}") from exc
-    names = {matcher_name, matcher_name.split("@")[0]}
-    if isinstance(data, dict) and "sigma" in data:
-        if data.get("matcher") not in names and data.get("matcher_id") not in names:
-            raise TuningError(f"{path} holds the threshold of {data.get('matcher')!r}, not {matcher_name!r}")
-        return _sigma(data["sigma"], path, matcher_name)
-    if isinstance(data, dict) and isinstance(data.get("thresholds"), dict):
-        for name in (matcher_name, matcher_name.split("@")[0]):
-            entry = data["thresholds"].get(name)
-            if entry is not None:
-                return _sigma(entry.get("sigma") if isinstance(entry, dict) else entry, path, name)
-        raise TuningError(f"{path} has no threshold for {matcher_name!r} (has {sorted(data['thresholds'])})")
-    raise TuningError(f"{path} is neither a tuned thresholds file nor a {{'thresholds': {{...}}}} table")
-
-
-def _sigma(value: object, path: Path, name: str) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
-        raise TuningError(f"{path}: threshold of {name!r} is {value!r}, not a number")
-    return float(value)

@@ -142,7 +142,7 @@ def load_torch_state(path: str | os.PathLike, who: str) -> dict[str, Any]:
 
     try:
         return torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, OSError, EOFError, ValueError, pickle.UnpicklingError) as exc:
+    except (RuntimeError, OSError, EOFError, ValueError, IndexError, KeyError, pickle.UnpicklingError) as exc:
         reason = next((line.strip() for line in str(exc).splitlines() if line.strip()), type(exc).__name__)
         raise WeightsError(f"{who}: cannot read the checkpoint {path} (damaged or not a torch file: {reason})") \
             from exc

@@ -70,3 +70,12 @@ def tiny_frameset(tmp_path_factory):
                 legend[1] = (oid, roles[oid])
             w.add_frame(ep, step, image, mask, legend, depth)
     return w.close()
+
+
+@pytest.fixture(scope="session")
+def real_frameset(tmp_path_factory):
+    """The real-photo frame-set (pin_match.realset, seed 0): built once per session from scikit-image's photos."""
+    pytest.importorskip("skimage")
+    from pin_match.realset import build
+
+    return build(tmp_path_factory.mktemp("real") / "realset")

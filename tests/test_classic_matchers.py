@@ -2,12 +2,15 @@
 
 Measured on the demo's default synthetic frame-set (exact ground truth, same bytes for the
 seed), by mean score per frame class: frames showing the target; frames showing a
-same-category distractor but not the target; frames showing no object at all. Small
-frame-sets hold too few look-alike frames for SIFT's sparse evidence to rank reliably.
+same-category distractor but not the target; frames showing no object at all. SIFT needs
+``min_inliers`` verified matches, which the small synthetic renders rarely give (6 of 77
+target frames, no other frame), so for it look-alike and nothing tie at 0. The real-photo
+tests check SIFT's floor and colour's saturation (issue 14.10, 14.11).
 """
 
 from __future__ import annotations
 
+import cv2
 import numpy as np
 import pytest
 
@@ -31,8 +34,12 @@ def test_scores_rank_target_above_lookalikes_above_nothing(name, ranking_set, tm
     nothing = ~target & ~scored.same_visible & ~scored.other_visible
     assert min(target.sum(), lookalike.sum(), nothing.sum()) >= 50
     means = [scored.score[m].mean() for m in (target, lookalike, nothing)]
-    assert means[0] > means[1] > means[2], f"{name}: target {means[0]:.3f}, look-alike {means[1]:.3f}, " \
-                                            f"nothing {means[2]:.3f}"
+    message = f"{name}: target {means[0]:.3f}, look-alike {means[1]:.3f}, nothing {means[2]:.3f}"
+    if name == "color":
+        assert means[0] > means[1] > means[2], message
+    else:  # sift verifies a model only with min_inliers: rarely on these small renders, never by chance
+        assert means[0] > means[1] >= means[2], message
+        assert scored.score[nothing].max() == 0.0 and (scored.score[target] >= 5).sum() >= 5
 
 
 def test_sift_verified_points_lie_on_the_pasted_object():
@@ -62,3 +69,49 @@ def test_color_window_centres_on_the_object():
     best = r.points[np.argmax(r.point_scores)]
     assert abs(best[0] - 248) < 25 and abs(best[1] - 498) < 25
     assert r.crop_scores[1] == pytest.approx(r.score) and r.crop_scores[0] < r.score  # only the lower crop sees it
+
+
+# ---------------------------------------------------------------- real photos (issue 14.10, 14.11)
+def _photo_target() -> tuple[Target, np.ndarray]:
+    """The cat's head from scikit-image's ``chelsea`` photo as a 3-view target, and a real photo without it."""
+    data = pytest.importorskip("skimage.data")
+    cat = data.chelsea()[40:200, 120:300]  # 160 x 180 px
+    view = np.dstack([cat, np.full(cat.shape[:2], 255, np.uint8)])
+    scene = np.ascontiguousarray(data.coffee()[:, 100:460])[:400]  # 400 x 360: a cup, a saucer, a table
+    return Target("cat", "cat", (view, view, view), ("a", "b", "c")), scene
+
+
+def test_sift_has_no_floor_of_two_on_a_real_photo_without_the_target():
+    """Any 2 matches fit a similarity exactly; with min_inliers they no longer score."""
+    target, scene = _photo_target()
+    frame = np.zeros((640, 360, 3), np.uint8)
+    frame[:400] = scene
+    loose = create_matcher("sift", min_inliers=2)  # the old rule
+    loose.prepare(target)
+    assert loose.match(frame).score >= 2  # chance models on real texture
+    strict = create_matcher("sift")
+    strict.prepare(target)
+    assert strict.match(frame).score == 0.0 and len(strict.match(frame).points) == 0
+    frame[420:580, 90:270] = target.views[0][..., :3]  # the cat pasted below the cup
+    found = strict.match(frame)
+    assert found.score >= strict.default_sigma and (found.points[:, 1] >= 420).all()
+
+
+def test_color_score_is_continuous_at_the_top():
+    """Two pastes of the same real object at different sizes: Swain & Ballard's min(r, 1) gives both 1.0."""
+    target, scene = _photo_target()
+    m = create_matcher("color", crops="whole")
+    m.prepare(target)
+    cat = target.views[0][..., :3]
+    scores, clipped = [], []
+    for size in (90, 160):
+        frame = cv2.resize(scene, (360, 640))
+        patch = cv2.resize(cat, (size * 180 // 160, size), interpolation=cv2.INTER_AREA)
+        frame[300:300 + size, 60:60 + patch.shape[1]] = patch
+        scores.append(m.match(frame).score)
+        small = cv2.resize(frame, (m.cfg.work_size, m.cfg.work_size), interpolation=cv2.INTER_AREA)
+        bins = m._bins(small)
+        weight = np.minimum(m._model / np.maximum(m._hist(bins), 1e-12), 1.0)[bins]
+        clipped.append(max(cv2.boxFilter(weight, -1, (k, k)).max() for k in m.cfg.windows))
+    assert clipped == [pytest.approx(1.0), pytest.approx(1.0)]  # the old weight saturates on both
+    assert all(0.5 < s < 1.0 for s in scores) and scores[0] != scores[1]

@@ -88,3 +88,78 @@ def test_import_names_the_missing_object(recording, tmp_path):
     shutil.rmtree(objects / "objects_images" / "obj_o")
     with pytest.raises(FrameSetError, match=r"object 'obj_o': missing reference folder"):
         import_recording(rec, objects, tmp_path / "fs")
+
+
+def test_png_frames_are_kept_losslessly_by_default(recording, tmp_path):
+    """Issue 14.9: the stored frame is the source file, byte for byte; JPEG only when asked."""
+    rec, objects, _ = recording
+    fs = import_recording(rec, objects, tmp_path / "fs")
+    for step in range(3):
+        fid = f"7_{step:04d}"
+        stored = fs.root / fs.frames.set_index("frame_id").loc[fid, "image"]
+        assert stored.suffix == ".png" and stored.read_bytes() == (rec / "7" / "rgb" / f"{step}.png").read_bytes()
+        source = cv2.cvtColor(cv2.imread(str(rec / "7" / "rgb" / f"{step}.png")), cv2.COLOR_BGR2RGB)
+        assert np.array_equal(fs.image(fid), source)
+    assert fs.manifest["provenance"]["image_format"] == "source"
+    lossy = import_recording(rec, objects, tmp_path / "jpeg", image_format="jpeg")
+    error = np.abs(lossy.image("7_0000").astype(int) - fs.image("7_0000").astype(int))
+    assert lossy.frames.image.str.endswith(".jpg").all() and error.max() > 0  # noise images: JPEG loses
+
+
+def test_jpeg_frames_keep_their_bytes(recording, tmp_path):
+    rec, objects, _ = recording
+    for step in range(3):
+        png = rec / "7" / "rgb" / f"{step}.png"
+        cv2.imwrite(str(png.with_suffix(".jpg")), cv2.imread(str(png)), [cv2.IMWRITE_JPEG_QUALITY, 80])
+        png.unlink()
+    fs = import_recording(rec, objects, tmp_path / "fs")
+    stored = fs.root / fs.frames.image.iloc[0]
+    assert stored.suffix == ".jpg" and stored.read_bytes() == (rec / "7" / "rgb" / "0.jpg").read_bytes()
+
+
+def test_views_are_taken_by_name_not_by_sorting(recording, tmp_path):
+    """Issue 14.2: front/back/top named any other way would sort into a silent swap; they are refused."""
+    rec, objects, _ = recording
+    folder = objects / "objects_images" / "obj_o"
+    for k, name in enumerate(("front", "back", "top")):
+        (folder / f"obj_o_{k}.png").rename(folder / f"{name}.png")
+    with pytest.raises(FrameSetError, match=r"object 'obj_o': needs exactly one obj_o_0\.png \(view 0: 0 frontal, "
+                                            r"1 back, 2 top\).*'back\.png', 'front\.png', 'top\.png'"):
+        import_recording(rec, objects, tmp_path / "fs")
+    assert not (tmp_path / "fs").exists()
+
+
+def test_views_keep_their_numbered_order(recording, tmp_path):
+    rec, objects, _ = recording
+    folder = objects / "objects_images" / "obj_t"
+    colours = [(200, 20, 20), (20, 200, 20), (20, 20, 200)]
+    for k, colour in enumerate(colours):
+        cv2.imwrite(str(folder / f"obj_t_{k}.png"), cv2.cvtColor(make_view(colour), cv2.COLOR_RGBA2BGRA))
+    fs = import_recording(rec, objects, tmp_path / "fs")
+    views = fs.target("obj_t").views
+    assert [tuple(int(c) for c in v[48, 48, :3]) for v in views] == colours
+
+
+def test_objects_take_the_split_of_their_episodes(recording, tmp_path):
+    """Issue 14.2: a per-episode split key; objects follow it; an object in two splits is refused."""
+    rec, objects, _ = recording
+    data = json.loads((rec / "episodes.json").read_text())
+    data["episodes"][0]["split"] = "train"
+    (rec / "episodes.json").write_text(json.dumps(data))
+    fs = import_recording(rec, objects, tmp_path / "fs", split="val")
+    assert set(fs.episodes.split) == {"train"} and set(fs.objects.split) == {"train"}
+    second = dict(data["episodes"][0], episode_id="8", split="val")
+    (rec / "8").symlink_to(rec / "7", target_is_directory=True)
+    (rec / "episodes.json").write_text(json.dumps({"episodes": [data["episodes"][0], second]}))
+    with pytest.raises(FrameSetError, match="object 'obj_t' is used by train and val episodes"):
+        import_recording(rec, objects, tmp_path / "fs2")
+
+
+def test_a_distractor_needs_descriptions_too(recording, tmp_path):
+    rec, objects, _ = recording
+    path = objects / "objects_descriptions.json"
+    data = json.loads(path.read_text())
+    del data["obj_o"]
+    path.write_text(json.dumps(data))
+    with pytest.raises(FrameSetError, match="object 'obj_o': no entry in .*every goal and distractor needs 3"):
+        import_recording(rec, objects, tmp_path / "fs")

@@ -22,8 +22,7 @@ from matchers.keypoint import (
     valid_matches,
 )
 from pin_match import registry
-from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
+from pin_match.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
 from pin_match.registry import create_matcher
 
 
@@ -222,10 +221,10 @@ def test_ieve_config_errors():
         create_matcher("ieve", gate="no-such-detector")
 
 
-def test_ieve_default_parts_are_owl_by_category_and_lightglue(monkeypatch):
+def test_ieve_default_parts_are_owl_by_category_and_disk_lightglue(monkeypatch):
     m = create_matcher("ieve")
     assert (m.gate.display_name, m.gate.cfg.query, m.gate.modality) == ("owl", "category", Modality.CATEGORY)
-    assert m.keypoints.display_name == "lightglue"
+    assert m.keypoints.display_name == "disk-lightglue"  # IEVE's keypoint stack: DISK + LightGlue
     before = m.id
     monkeypatch.setattr(type(m.keypoints), "version", m.keypoints.version + 1)
     assert m.id != before  # a part's new version renames the composite's caches
@@ -250,7 +249,7 @@ def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, 
     detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
     assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, 48)
     if name == "superglue":
-        assert m._model.config.sinkhorn_iterations == 20
+        assert m.cfg.sinkhorn_iterations == 20  # read by superglue_pair, not by the model's own config
     rng = np.random.default_rng(0)
     for shape in ((640, 360, 3), (203, 331, 3)):
         frame = rng.integers(0, 256, shape, dtype=np.uint8)
@@ -266,4 +265,149 @@ def test_superglue_defaults_are_pins():
     assert m.default_sigma == 8.0
     cfg = m.cfg
     assert (cfg.nms_radius, cfg.keypoint_threshold, cfg.max_keypoints) == (4, 0.005, 1024)
-    assert (cfg.sinkhorn_iterations, cfg.match_threshold, cfg.crops) == (20, 0.2, "whole")
+    assert (cfg.sinkhorn_iterations, cfg.match_threshold, cfg.crops, cfg.combine) == (20, 0.2, "whole", "sum")
+    with pytest.raises(ConfigError, match="combine='mean'"):
+        create_matcher("superglue", combine="mean")
+
+
+# ---------------------------------------------------------------------------- SuperGlue against its reference
+# An independent float64 numpy re-implementation of magicleap's SuperGlue matching stage
+# (models/superglue.py of SuperGluePretrainedNetwork, and the paper's section 3): keypoint
+# encoder, self / cross attention updating both sets at once, final projection, entropic
+# optimal transport with dustbins whose marginals are each pair's own m and n, mutual check.
+# It reads the transformers checkpoint's tensors by name; transformers stores the attention
+# heads as contiguous channel blocks (its conversion permuted magicleap's interleaved ones).
+def _np_bn(x, sd, p):
+    return (x - sd[p + ".running_mean"]) / np.sqrt(sd[p + ".running_var"] + 1e-5) * sd[p + ".weight"] + sd[p + ".bias"]
+
+
+def _np_linear(x, sd, p):
+    return x @ sd[p + ".weight"].T + sd[p + ".bias"]
+
+
+def _np_mlp(x, sd, p, n_hidden):
+    for i in range(n_hidden):
+        x = np.maximum(_np_bn(_np_linear(x, sd, f"{p}.{i}.linear"), sd, f"{p}.{i}.batch_norm"), 0.0)
+    return _np_linear(x, sd, f"{p}.{n_hidden}")
+
+
+def _np_propagate(x, source, sd, p, heads):
+    n, d = x.shape
+    q = _np_linear(x, sd, p + ".attention.self.query").reshape(n, heads, d // heads)
+    k = _np_linear(source, sd, p + ".attention.self.key").reshape(len(source), heads, d // heads)
+    v = _np_linear(source, sd, p + ".attention.self.value").reshape(len(source), heads, d // heads)
+    logits = np.einsum("nhd,mhd->hnm", q, k) / np.sqrt(d // heads)
+    prob = np.exp(logits - logits.max(-1, keepdims=True))
+    prob /= prob.sum(-1, keepdims=True)
+    message = _np_linear(np.einsum("hnm,mhd->nhd", prob, v).reshape(n, d), sd, p + ".attention.output.dense")
+    return _np_mlp(np.concatenate([x, message], 1), sd, p + ".mlp", 1)
+
+
+def _np_logsumexp(x, axis):
+    top = x.max(axis=axis, keepdims=True)
+    return (top + np.log(np.exp(x - top).sum(axis=axis, keepdims=True))).squeeze(axis)
+
+
+def reference_superglue(model, image0, image1, iterations, threshold):
+    """Per observation keypoint, its valid match confidence (0 when none). image = (xy, scores, descriptors, h, w)."""
+    sd = {k: v.detach().double().numpy() for k, v in model.state_dict().items()}
+    cfg = model.config
+    desc = []
+    for xy, sc, de, h, w in (image0, image1):
+        xy, sc, de = (np.asarray(t.detach().cpu(), np.float64) for t in (xy, sc, de))
+        norm = (xy - [w / 2, h / 2]) / (0.7 * max(h, w))
+        desc.append(de + _np_mlp(np.concatenate([norm, sc[:, None]], 1), sd, "keypoint_encoder.encoder",
+                                 len(cfg.keypoint_encoder_sizes)))
+    for i, kind in enumerate(cfg.gnn_layers_types):
+        sources = desc[::-1] if kind == "cross" else desc
+        desc = [d + _np_propagate(d, s, sd, f"gnn.layers.{i}", cfg.num_attention_heads) for d, s in zip(desc, sources)]
+    p0, p1 = (_np_linear(d, sd, "final_projection.final_proj") for d in desc)
+    m, n = len(p0), len(p1)
+    z = np.full((m + 1, n + 1), float(sd["bin_score"]))
+    z[:m, :n] = p0 @ p1.T / np.sqrt(p0.shape[1])
+    log_mu = np.log(np.r_[np.ones(m), n] / (m + n))  # marginals from this pair's real counts
+    log_nu = np.log(np.r_[np.ones(n), m] / (m + n))
+    u, v = np.zeros(m + 1), np.zeros(n + 1)
+    for _ in range(iterations):
+        u = log_mu - _np_logsumexp(z + v[None], 1)
+        v = log_nu - _np_logsumexp(z + u[:, None], 0)
+    p = np.exp(z + u[:, None] + v[None])[:m, :n] * (m + n)
+    best0, best1 = p.argmax(1), p.argmax(0)
+    mutual = best1[best0] == np.arange(m)
+    return np.where(mutual & (p.max(1) > threshold), p.max(1), 0.0)
+
+
+def corner_keypoints(detector, grays, device):
+    """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
+    equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
+    9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
+    from matchers.keypoint import Keypoints
+
+    proj = np.random.default_rng(7).standard_normal((81, 32))
+    found = []
+    for gray in grays:
+        corners = cv2.goodFeaturesToTrack(gray, maxCorners=80, qualityLevel=0.02, minDistance=5)
+        xy = np.zeros((0, 2), np.float32) if corners is None else corners.reshape(-1, 2).round()
+        response = cv2.cornerMinEigenVal(gray, 3)
+        padded = np.pad(gray.astype(np.float64), 4, mode="edge")
+        patches = np.stack([padded[int(y):int(y) + 9, int(x):int(x) + 9].ravel() for x, y in xy]) if len(xy) else \
+            np.zeros((0, 81))
+        desc = (patches - patches.mean(1, keepdims=True)) @ proj
+        desc /= np.maximum(np.linalg.norm(desc, axis=1, keepdims=True), 1e-9)
+        score = response[xy[:, 1].astype(int), xy[:, 0].astype(int)] / max(float(response.max()), 1e-12)
+        found.append(Keypoints(xy=torch.tensor(xy, dtype=torch.float32, device=device),
+                               scores=torch.tensor(score, dtype=torch.float32, device=device),
+                               descriptors=torch.tensor(desc, dtype=torch.float32, device=device),
+                               height=gray.shape[0], width=gray.shape[1]))
+    return found
+
+
+@pytest.fixture(scope="module")
+def superglue_peaky_dir(tmp_path_factory):
+    """Random SuperGlue weights drawn wider than the default, so its assignment is peaked enough for real matches."""
+    import transformers
+    from tiny_weights import TINY_SUPERPOINT
+
+    torch.manual_seed(0)
+    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
+                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"] * 2,
+                                          num_attention_heads=2, initializer_range=0.2)
+    path = tmp_path_factory.mktemp("superglue_peaky")
+    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
+    return str(path)
+
+
+@pytest.mark.parametrize("iterations", [20, 3])
+def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, superglue_peaky_dir, target,
+                                                                 iterations):
+    import matchers.keypoint as keypoint
+
+    monkeypatch.setattr(keypoint, "detect", corner_keypoints)
+    sums = {}
+    for combine in ("sum", "max"):
+        m = create_matcher("superglue", weights=superglue_peaky_dir, sinkhorn_iterations=iterations,
+                           match_threshold=0.05, combine=combine)
+        m.prepare(target)
+        frame = np.full((300, 420, 3), 128, np.uint8)
+        frame[40:136, 60:156] = target.views[0][..., :3]  # the frontal view pasted, plus clutter
+        frame[150:246, 250:346] = target.views[2][..., :3]
+        frame[260:290, 20:400:20] = 30
+
+        def spy(pairs, xy, verdict=m._verdict, combine=combine):  # records the per-reference sums on the way
+            sums[combine] = [float(p.confidence.sum()) for p in pairs]
+            return verdict(pairs, xy)
+
+        monkeypatch.setattr(m, "_verdict", spy)
+        sums[combine + "_score"] = m.match(frame).score
+    refs = prepare_references(target.views)
+    obs = corner_keypoints(None, [cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)], "cpu")[0]
+    expected = []
+    for ref in corner_keypoints(None, [r.gray for r in refs], "cpu"):
+        conf = reference_superglue(m._model, (obs.xy, obs.scores, obs.descriptors, obs.height, obs.width),
+                                   (ref.xy, ref.scores, ref.descriptors, ref.height, ref.width), iterations, 0.05)
+        expected.append(conf.sum())
+    assert len({len(k.xy) for k in (obs, *corner_keypoints(None, [r.gray for r in refs], "cpu"))}) > 2
+    assert min(expected) > 0.5  # real matches in every reference, so the comparison means something
+    np.testing.assert_allclose(sums["sum"], expected, rtol=1e-4)
+    assert sums["sum_score"] == pytest.approx(sum(expected), rel=1e-4)
+    assert sums["max_score"] == pytest.approx(max(expected), rel=1e-4)

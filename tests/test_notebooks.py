@@ -17,7 +17,7 @@ from pin_match.synth import generate
 
 REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPO / "notebooks").glob("[0-9][0-9]_*.ipynb"))
-NAMES = ["01_benchmark_overview", "02_threshold_tuning", "03_similarity", "04_error_gallery"]
+NAMES = ["01_benchmark_overview", "02_threshold_tuning", "03_similarity", "04_error_gallery", "05_training"]
 MATCHERS = ["sift", "color"]
 
 
@@ -48,7 +48,8 @@ def test_load_bench(bench_run):
         assert run.tables[name].meta["frameset_fingerprint"] == run.frameset.fingerprint
         val = run.scored(name, "val")
         assert set(val.split) == {"val"} and len(run.scored(name)) == len(run.frameset.frames)
-    assert list(run.table().columns[:5]) == ["sigma", "%Match", "TM", "CM", "NM"]
+    assert list(run.table().columns[:6]) == ["sigma", "sigma from", "%Match", "TM", "CM", "NM"]
+    assert set(run.table()["sigma from"]) == {"tuned: first-match on train"}
 
 
 def test_load_bench_errors(bench_run, tmp_path):
@@ -64,14 +65,32 @@ def test_load_bench_errors(bench_run, tmp_path):
         load_bench(copy, bench_run / "frameset")
 
 
+@pytest.fixture(scope="module")
+def trained_head(bench_run, tmp_path_factory):
+    """A head trained for 2 epochs on the bench frame-set with the tiny random ViT (05_training reads it)."""
+    from tiny_weights import save_tiny_timm_vit
+
+    from pin_match.training import TrainConfig, train
+
+    root = tmp_path_factory.mktemp("training")
+    backbone_cfg = dict(model_name="test_vit", img_size=64, weights=str(save_tiny_timm_vit(root / "vit")))
+    train(bench_run / "frameset", root / "head", backbone="dino", overrides=backbone_cfg, features=root / "features",
+          cfg=TrainConfig(epochs=2, hidden=16, threads=1), progress=False)
+    return root
+
+
 @pytest.mark.parametrize("name", NAMES)
-def test_notebook_runs(name, bench_run, tmp_path, monkeypatch):
+def test_notebook_runs(name, bench_run, tmp_path, monkeypatch, request):
     nbformat = pytest.importorskip("nbformat")
     nbclient = pytest.importorskip("nbclient")
     monkeypatch.setenv("PIN_MATCH_RUN_DIR", str(bench_run))
     monkeypatch.delenv("PIN_MATCH_FRAMESET", raising=False)  # default: RUN_DIR/frameset
     monkeypatch.setenv("MPLBACKEND", "Agg")  # the notebooks switch to the inline backend themselves
     monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    if name == "05_training":
+        training = request.getfixturevalue("trained_head")
+        monkeypatch.setenv("PIN_MATCH_HEAD", str(training / "head"))
+        monkeypatch.setenv("PIN_MATCH_FEATURES", str(training / "features"))
     nb = nbformat.read(REPO / "notebooks" / f"{name}.ipynb", as_version=4)
     client = nbclient.NotebookClient(nb, timeout=300, kernel_name="python3",
                                      resources={"metadata": {"path": str(REPO)}})

@@ -8,8 +8,7 @@ from tiny_weights import save_tiny_owl
 
 from conftest import make_view
 from matchers.owl import clip_tokenizer, closest_reference, owl_verdict
-from pin_match.frameset import Target
-from pin_match.matcher import ConfigError, MatcherError, Modality
+from pin_match.matcher import ConfigError, MatcherError, Modality, Target
 from pin_match.registry import create_matcher
 
 
@@ -72,6 +71,9 @@ def test_tokenizer_is_open_clips_with_owl_padding():
 def test_query_is_checked_and_category_query_changes_modality():
     with pytest.raises(ConfigError, match="query"):
         create_matcher("owl", query="label")
+    with pytest.raises(ConfigError, match="prompt='templates'"):
+        create_matcher("owl", prompt="templates")
+    assert create_matcher("owl").cfg.prompt == "description"
     assert create_matcher("owl").modality is Modality.TEXTUAL
     assert create_matcher("owl", query="category").modality is Modality.CATEGORY
     with pytest.raises(ConfigError, match="top_k"):
@@ -85,7 +87,7 @@ def test_construction_loads_nothing_and_offline_error_names_hub_id_and_override(
 
 
 # ---------------------------------------------------------------------------- tiny real models
-@pytest.mark.parametrize("name,options", [("owl", {}), ("owl", {"templates": False}), ("owl-image", {})])
+@pytest.mark.parametrize("name,options", [("owl", {}), ("owl", {"prompt": "imagenet-80"}), ("owl-image", {})])
 def test_tiny_checkpoint_gives_valid_deterministic_results(owl_dir, target, name, options):
     m = create_matcher(name, weights=owl_dir, top_k=7, **options)
     m.prepare(target)
@@ -115,3 +117,66 @@ def test_category_query_reads_the_label_and_needs_it(owl_dir, target):
     assert m._queries.shape[0] == 1
     with pytest.raises(MatcherError, match="empty category"):
         m.prepare(Target(target.object_id, "", target.views, target.descriptions))
+
+
+# ---------------------------------------------------------------------------- against CLIP on Wheels' ClipOwl
+def clip_owl_score(model, image: np.ndarray, sentence: str) -> float:
+    """CoW's ``ClipOwl.forward`` for one sentence, re-implemented: open_clip's tokenizer cut to OWL's 16 tokens
+    (padding id 0), the processor's resize and normalisation, the full detection forward, then the best box's
+    sigmoid (its ``post_process``: max over queries, then sigmoid)."""
+    import open_clip
+    import torch
+    from transformers import OwlViTImageProcessor
+
+    ids = open_clip.get_tokenizer("ViT-B-32")([sentence], context_length=16)
+    side = model.config.vision_config.image_size
+    pixels = OwlViTImageProcessor(size={"height": side, "width": side})(images=[image], return_tensors="pt")
+    with torch.no_grad():
+        out = model(input_ids=ids, attention_mask=(ids != 0).long(), pixel_values=pixels["pixel_values"])
+    return float(torch.sigmoid(out.logits[0].max(dim=-1).values).max())
+
+
+def long_target(target):
+    long = "a small red ceramic coffee mug with thin yellow stripes and a chipped white handle on the left side"
+    return Target(target.object_id + "_long", target.category, target.views, (long, "a striped cup", "a red mug"))
+
+
+@pytest.mark.parametrize("prompt,sentence", [("description", "{}"), ("a-photo-of", "a photo of a {}.")])
+def test_text_scores_equal_clip_owl_forward(owl_dir, target, prompt, sentence):
+    from transformers import OwlViTForObjectDetection
+
+    model = OwlViTForObjectDetection.from_pretrained(owl_dir).eval()
+    m = create_matcher("owl", weights=owl_dir, crops="whole", prompt=prompt)
+    image = np.random.default_rng(3).integers(0, 256, (360, 360, 3), dtype=np.uint8)
+    for t in (target, long_target(target)):
+        with pytest.warns() if t is not target else _no_warning():
+            m.prepare(t)
+        expected = max(clip_owl_score(model, image, sentence.format(d)) for d in t.descriptions)
+        assert m.match(image).score == pytest.approx(expected, abs=1e-6)
+
+
+def _no_warning():
+    import contextlib
+    import warnings
+
+    @contextlib.contextmanager
+    def ctx():
+        with warnings.catch_warnings():
+            warnings.simplefilter("error")
+            yield
+
+    return ctx()
+
+
+def test_truncated_prompts_warn_once_per_target(owl_dir, target):
+    from matchers.owl import TruncationWarning
+
+    m = create_matcher("owl", weights=owl_dir)
+    with pytest.warns(TruncationWarning, match=r"target mug_x_long: 1 prompt\(s\) longer than OWL-ViT's 16 tokens"):
+        m.prepare(long_target(target))
+    with _no_warning():
+        m.prepare(long_target(target))  # the same target again: already reported
+        m.prepare(target)               # short descriptions: nothing to report
+    m80 = create_matcher("owl", weights=owl_dir, prompt="imagenet-80")
+    with pytest.warns(TruncationWarning, match=r"mug_x_long: 8\d prompt\(s\)"):  # every template cuts it
+        m80.prepare(long_target(target))

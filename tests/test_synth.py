@@ -120,3 +120,32 @@ def test_refuses_existing_output(synth):
 
     with pytest.raises(FrameSetError, match="already exists"):
         generate(synth.root, **SMALL)
+
+
+# ---------------------------------------------------------------- placement never fails (issue 14.1)
+BIG = [(0.45, 0.8), (0.4, 0.7), (0.39, 0.65), (0.33, 0.94), (0.3, 0.6)] * 2 + [(0.25, 0.53), (0.19, 0.41)]
+
+
+@pytest.mark.parametrize("seed", range(40))
+def test_every_room_takes_twelve_large_objects(seed):
+    """Sizes the surfaces of most rooms cannot hold: the floor along the walls takes the rest, validly."""
+    from pin_match.synth.scene import _overlaps, make_room, place_objects
+
+    room = make_room(np.random.default_rng(seed))
+    spots = place_objects(room, BIG, np.random.default_rng(seed + 1000))
+    assert len(spots) == len(BIG)
+    for k, ((x, y, z, _), (radius, _)) in enumerate(zip(spots, BIG)):
+        assert radius <= x <= room.width - radius and radius <= y <= room.depth - radius
+        if z == 0.0:  # on the floor: clear of every piece of furniture
+            assert not _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.0)
+        for (ox, oy, oz, _), (r, _) in list(zip(spots, BIG))[:k]:
+            if abs(oz - z) <= 0.05:
+                assert np.hypot(x - ox, y - oy) > radius + r
+    assert place_objects(room, BIG, np.random.default_rng(seed + 1000)) == spots  # still a pure function
+
+
+@pytest.mark.slow
+def test_seed_whose_surfaces_overflow_still_builds(tmp_path):
+    """Seed 11 at this size used to stop with 'no free surface for an object of radius ...'."""
+    fs = generate(tmp_path / "fs", seed=11, episodes=24, objects_per_category=2, frames_per_episode=1, workers=1)
+    assert len(fs.episodes) == 24 and len(fs.frames) == 24

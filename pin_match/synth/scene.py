@@ -245,7 +245,11 @@ def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.G
 
     Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
     nightstand, but every kind of surface gets used; shelves only take what fits under the
-    next board. An object that fits nowhere is an error naming its size.
+    next board. An object that fits on no surface (a big one in a room of small furniture,
+    or one that comes after the surfaces filled up) stands on the floor along a wall, clear
+    of furniture, as large objects do in a real house; the room's middle stays free for
+    the camera walk. Every draw comes from ``rng``, so the result is still a pure function
+    of the seeds. Only a room without any free floor along its walls is an error.
     """
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
@@ -264,5 +268,33 @@ def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.G
                 placed = True
                 break
         if not placed:
-            raise ValueError(f"no free surface for an object of radius {radius:.2f} m and height {height:.2f} m")
+            x, y = _floor_spot(room, radius, taken, rng)
+            taken.append((x, y, 0.0, radius))
+            out.append((x, y, 0.0, float(rng.uniform(-np.pi, np.pi))))
     return out
+
+
+FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
+
+
+def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float, float]],
+                rng: np.random.Generator, tries: int = 500) -> tuple[float, float]:
+    """A free floor position for an object of ``radius``, clear of furniture and other objects.
+
+    Close to a wall first, so the room's middle stays free for the camera walk; the band
+    widens only when the walls are full.
+    """
+    W, D = room.width, room.depth
+    lo = radius + 0.05
+    for band in FLOOR_BANDS:
+        for _ in range(tries):
+            wall, t, u = int(rng.integers(4)), rng.uniform(lo, max(W, D) - lo), rng.uniform(lo, lo + band)
+            x, y = ((t, u), (t, D - u), (u, t), (W - u, t))[wall]
+            if not (lo <= x <= W - lo and lo <= y <= D - lo):
+                continue
+            if _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.05):
+                continue
+            if all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02 for ox, oy, z, r in taken):
+                return float(x), float(y)
+    raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
+                     f"{W:.1f} x {D:.1f} m room")

@@ -1,0 +1,116 @@
+"""The paper's tables: rows of metrics rendered as DataFrames, Markdown and LaTeX.
+
+Used by ``report``, ``bench``, ``similarity``, ``analysis`` and the CLI. A row is built
+explicitly from what it comes from (``report_row`` for a report, ``tuning_row`` for a
+tuning result), never guessed from a dict's keys; every row carries its sigma and where
+that sigma came from. Undefined numbers are NaN in the DataFrame and "n/a" in the text,
+never 0.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+# (metric key, column header, decimals): the paper's four first, then ours
+TABLE_COLUMNS = [("match_pct", "%Match", 2), ("tm_pct", "TM", 2), ("cm_pct", "CM", 2), ("nm_pct", "NM", 2),
+                 ("gm_pct", "GM", 2), ("om_pct", "OM", 2), ("target_recall", "Recall", 2),
+                 ("auroc_target", "AUROC", 3), ("first_match_precision", "FM-prec", 2)]
+CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
+SIGMA_FROM = "sigma from"
+
+
+@dataclass(frozen=True)
+class Row:
+    """One matcher's line of the paper's table."""
+
+    name: str
+    sigma: float
+    sigma_source: str
+    metrics: dict
+
+
+def report_row(result: dict) -> Row:
+    """The row of a ``report`` / ``evaluate`` result (its metrics at the reported sigma)."""
+    return Row(result["matcher_id"], result["sigma"], result["sigma_source"], result["metrics"])
+
+
+def tuning_row(result: dict) -> Row:
+    """The row of a ``tune`` result: the metrics on the tuning split at the chosen sigma."""
+    return Row(result["matcher_id"], result["sigma"], f"tuned: {result['objective']} on {result['split']}",
+               result["metrics_at_sigma"])
+
+
+def side_by_side(rows: Sequence[Row]) -> pd.DataFrame:
+    """The paper's table: one row per matcher (sigma, where it came from, then the metrics), NaN = undefined."""
+    data = {}
+    for r in rows:
+        data[r.name] = {"sigma": r.sigma, SIGMA_FROM: r.sigma_source,
+                        **{header: _nan(r.metrics.get(key)) for key, header, _ in TABLE_COLUMNS}}
+    return pd.DataFrame.from_dict(data, orient="index").rename_axis("Matcher")
+
+
+def sigma_caption(rows: Sequence[Row], split: str) -> str:
+    """A caption that says which sigma every row is at: one phrase when they share a source."""
+    sources = sorted({r.sigma_source for r in rows})
+    said = f"sigma {sources[0]}" if len(sources) == 1 else "sigma per row, source in the 'sigma from' column"
+    return f"Detection on the {split} split; {said}."
+
+
+def category_table(categories: pd.DataFrame) -> pd.DataFrame:
+    """The per-category metrics in the table layout (rows = target categories)."""
+    return pd.DataFrame({header: categories[key] for key, header, _ in CATEGORY_COLUMNS}).rename_axis("Category")
+
+
+def _nan(value: float | None) -> float:
+    return math.nan if value is None else float(value)
+
+
+def _decimals(header: str) -> int | None:
+    return next((d for _, h, d in CATEGORY_COLUMNS if h == header), None)
+
+
+def format_value(value: object, decimals: int | None) -> str:
+    """Fixed decimals (None: shortest form, for sigma); text as is; undefined is "n/a", never 0."""
+    if isinstance(value, str):
+        return value
+    if value is None or (isinstance(value, (float, np.floating)) and math.isnan(value)):
+        return "n/a"
+    if decimals is None:
+        return f"{float(value):g}"
+    return f"{float(value):.{decimals}f}"
+
+
+def _rows(df: pd.DataFrame) -> list[list[str]]:
+    return [[str(index)] + [format_value(v, _decimals(c)) for c, v in row.items()] for index, row in df.iterrows()]
+
+
+def markdown_table(df: pd.DataFrame) -> str:
+    header = [df.index.name or "", *df.columns]
+    align = ["---:" if pd.api.types.is_numeric_dtype(df[c]) else "---" for c in df.columns]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---", *align]) + "|"]
+    lines += ["| " + " | ".join(r) + " |" for r in _rows(df)]
+    return "\n".join(lines)
+
+
+def _tex(text: str) -> str:
+    for a, b in (("\\", r"\textbackslash{}"), ("&", r"\&"), ("%", r"\%"), ("_", r"\_"), ("#", r"\#")):
+        text = text.replace(a, b)
+    return text
+
+
+def latex_table(df: pd.DataFrame, caption: str = "") -> str:
+    header = [df.index.name or "", *df.columns]
+    cols = "".join("r" if pd.api.types.is_numeric_dtype(df[c]) else "l" for c in df.columns)
+    lines = [r"\begin{table}[t]", r"\centering", r"\begin{tabular}{l" + cols + "}", r"\toprule",
+             " & ".join(_tex(h) for h in header) + r" \\", r"\midrule"]
+    lines += [" & ".join(_tex(c) for c in r) + r" \\" for r in _rows(df)]
+    lines += [r"\bottomrule", r"\end{tabular}"]
+    if caption:
+        lines.append(r"\caption{" + _tex(caption) + "}")
+    lines.append(r"\end{table}")
+    return "\n".join(lines)

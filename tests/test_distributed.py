@@ -1,0 +1,170 @@
+"""Scoring on a Dask LocalCluster: the local path's bytes, resume across paths, a killed worker, errors."""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from distributed import Client, LocalCluster
+from slow_plugin import SlowConfig, SlowMatcher
+
+from pin_match.cli import main
+from pin_match.distributed import DistributedError, MatcherSpec, connect
+from pin_match.matcher import MatcherError
+from pin_match.registry import create_matcher, register_matcher
+from pin_match.scoring import score
+
+TESTS = Path(__file__).parent
+
+
+@dataclass
+class NanConfig(SlowConfig):
+    bad_target: str = ""
+
+
+@register_matcher("test-nan-for")
+class NanForTarget(SlowMatcher):
+    """test-slow, but every score is NaN while prepared for ``bad_target``: a matcher error on one episode."""
+
+    Config = NanConfig
+
+    def _prepare(self, target):
+        self.bad = target.object_id == self.cfg.bad_target
+
+    def _match_crops(self, crops):
+        results = super()._match_crops(crops)
+        for r in results:
+            r.score = float("nan") if self.bad else r.score
+        return results
+
+
+@pytest.fixture(scope="module")
+def log(tmp_path_factory) -> Path:
+    return tmp_path_factory.mktemp("dask") / "prepare.log"
+
+
+@pytest.fixture(scope="module")
+def client(log):
+    """Two single-threaded worker processes that import the test matchers and log every prepare."""
+    path = os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])
+    env = {"PIN_MATCH_TEST_LOG": str(log), "PYTHONPATH": path}
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0", env=env) as cluster, \
+            Client(cluster) as c:
+        yield c
+
+
+def _prepares(log: Path) -> list[tuple[int, str]]:
+    """(pid, target) per prepare since the log was last cleared."""
+    if not log.exists():
+        return []
+    return [(int(pid), target) for pid, _, target in (line.split() for line in log.read_text().splitlines())]
+
+
+def _bytes(out: Path, name: str = "scores_all.parquet") -> bytes:
+    (path,) = out.glob(f"*/*/{name}")
+    return path.read_bytes()
+
+
+def test_cluster_table_is_the_local_bytes_and_each_path_resumes_the_other(tiny_frameset, tmp_path, client, log,
+                                                                           monkeypatch, capsys):
+    monkeypatch.setenv("PIN_MATCH_TEST_LOG", str(log))
+    kw = dict(overrides={"delay": 0.0}, progress=False)
+    score(tiny_frameset, "test-slow", out=tmp_path / "local", **kw)
+    reference = _bytes(tmp_path / "local")
+
+    log.unlink(missing_ok=True)
+    score(tiny_frameset, "test-slow", out=tmp_path / "cluster", client=client, overrides={"delay": 0.0})
+    assert _bytes(tmp_path / "cluster") == reference
+    assert "8/8" in capsys.readouterr().err  # the bar counts frames over the completed tasks
+    assert sorted(t for _, t in _prepares(log)) == ["mug_a", "mug_c"]
+    assert all(pid != os.getpid() for pid, _ in _prepares(log))
+
+    # a local run stopped after episode ep_train (its shard wrote that chunk), finished on the cluster
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_cluster", shard="0/2", **kw)
+    log.unlink()
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_cluster", client=client, **kw)
+    assert _bytes(tmp_path / "to_cluster") == reference
+    assert [t for _, t in _prepares(log)] == ["mug_c"]
+
+    # and the reverse: a cluster run stopped after ep_train, finished here
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_local", shard="0/2", client=client, **kw)
+    log.unlink()
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_local", **kw)
+    assert _bytes(tmp_path / "to_local") == reference
+    assert _prepares(log) == [(os.getpid(), "mug_c")]
+
+
+def test_a_matcher_error_stops_the_run_naming_the_frames_as_locally(tiny_frameset, tmp_path, client):
+    kw = dict(overrides={"delay": 0.0, "bad_target": "mug_c"}, progress=False)
+    with pytest.raises(MatcherError) as local:
+        score(tiny_frameset, "test-nan-for", out=tmp_path / "local", **kw)
+    with pytest.raises(MatcherError) as remote:
+        score(tiny_frameset, "test-nan-for", out=tmp_path / "cluster", client=client, **kw)
+    assert "non-finite score" in str(remote.value)
+    assert "(episode 'ep_val', frames ep_val_0000..ep_val_0003)" in str(remote.value)
+    assert str(remote.value) == str(local.value)
+    assert not list((tmp_path / "cluster").glob("*/*/chunks/ep_val.parquet"))
+    assert not list((tmp_path / "cluster").glob("*/*/*.parquet"))
+
+
+def test_a_worker_built_unlike_the_client_refuses():
+    sift = create_matcher("sift")
+    with pytest.raises(DistributedError, match="install the same pin_match"):
+        MatcherSpec(type(sift), sift.cfg, "sift@000000000000").build()
+    assert MatcherSpec.of(sift).build().id == sift.id
+
+
+def _free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+def test_an_unreachable_scheduler_is_a_clear_error_within_the_timeout(tiny_frameset, tmp_path, capsys):
+    address = f"tcp://127.0.0.1:{_free_port()}"
+    start = time.monotonic()
+    with pytest.raises(DistributedError, match=f"cannot reach the Dask scheduler '{address}' within 2 s"):
+        connect(address, timeout=2)
+    assert time.monotonic() - start < 20
+    assert main(["score", str(tiny_frameset.root), "--matcher", "sift", "--scheduler", address,
+                 "--scheduler-timeout", "1", "--out", str(tmp_path)]) == 2
+    assert "pin-match score: error: cannot reach the Dask scheduler" in capsys.readouterr().err
+
+
+def test_cli_scores_on_a_local_cluster_and_on_an_address(tiny_frameset, tmp_path, client):
+    args = ["score", str(tiny_frameset.root), "--matcher", "test-slow", "--cfg", "delay=0", "--quiet"]
+    assert main([*args, "--out", str(tmp_path / "here")]) == 0
+    assert main([*args, "--out", str(tmp_path / "local"), "--scheduler", "local", "--workers", "1"]) == 0
+    assert main([*args, "--out", str(tmp_path / "address"), "--scheduler", client.scheduler.address]) == 0
+    assert _bytes(tmp_path / "local") == _bytes(tmp_path / "here") == _bytes(tmp_path / "address")
+
+
+def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tmp_path, client, log):
+    """SIGKILL to the worker process that is scoring an episode: the scheduler runs it again on another."""
+    client.wait_for_workers(2, timeout=120)
+    log.unlink(missing_ok=True)
+    result: dict = {}
+    run = threading.Thread(target=lambda: result.update(table=score(
+        tiny_frameset, "test-slow", overrides={"delay": 0.5}, out=tmp_path / "cluster", client=client,
+        progress=False)))
+    run.start()
+    deadline = time.monotonic() + 120
+    while not _prepares(log) and time.monotonic() < deadline:
+        time.sleep(0.02)
+    victim, target = _prepares(log)[0]  # about 2 s of scoring left in that episode
+    os.kill(victim, signal.SIGKILL)
+    run.join(timeout=240)
+    assert not run.is_alive()
+
+    table = result["table"]
+    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", progress=False)
+    assert table.frames.equals(reference.frames)  # every frame once, same rows (the delay does not change scores)
+    assert not table.frames.frame_id.duplicated().any()
+    again = [pid for pid, t in _prepares(log) if t == target and pid != victim]
+    assert len(again) == 1  # the killed episode was prepared and scored once more, by another process

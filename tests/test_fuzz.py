@@ -1,0 +1,242 @@
+"""Property-based fuzzing of frame-sets and recordings (issue 14.12): damage in, one named error out.
+
+Hypothesis draws a sequence of damages (delete a file, truncate it, overwrite it with other
+bytes, replace a JSON value by one of the wrong type, drop or blank a table row, write a
+wrong-typed cell) on a copy of a valid frame-set or PIN recording, then runs the CLI on it.
+Every case must end in exit code 0 (the damage did not matter) or 2 with one line naming
+the problem, never a traceback; and nothing may be half-written: a failed import leaves
+no frame-set and no staging folder, a failed score leaves no table and no temporary file.
+The numbers of cases are in docs/reliability.md.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
+from pin_match.cli import main
+
+FRAMESET_CASES = 40
+RECORDING_CASES = 60
+WRONG_VALUES = st.sampled_from([None, "", "x", -1, 0, 3.5, 10**12, [], {}, ["a"], {"a": 1}, True, "../../etc"])
+
+
+@dataclass
+class FuzzConfig(CropConfig):
+    pass
+
+
+@register_matcher("test-fuzz-mean")
+class MeanMatcher(CropMatcher):
+    """Score = mean brightness / 255 of the crop: reads every frame, costs nothing."""
+
+    Config = FuzzConfig
+    modality = Modality.VISUAL
+    default_sigma = 0.3
+
+    def _prepare(self, target):
+        pass
+
+    def _match_crops(self, crops):
+        return [MatchResult(score=float(c.mean()) / 255.0, points=np.array([[1.0, 1.0]], np.float32),
+                            point_scores=np.array([float(c.mean()) / 255.0], np.float32)) for c in crops]
+
+
+# ------------------------------------------------------------------ damages
+STRUCTURE = (".json", ".csv", ".parquet", ".gz", ".npy")
+
+
+@st.composite
+def damages(draw, files: list[Path]) -> list[tuple]:
+    """A list of (kind, file, argument) to apply in order; half of them hit the tables, JSON and arrays."""
+    kinds = st.sampled_from(["delete", "truncate", "garbage", "json", "drop_row", "cell", "column"])
+    structure = [f for f in files if f.suffix in STRUCTURE]
+    out = []
+    for _ in range(draw(st.integers(1, 3))):
+        kind = draw(kinds)
+        pool = structure if structure and draw(st.integers(0, 2)) else files
+        index = pool[draw(st.integers(0, len(pool) - 1))]
+        if kind == "truncate":
+            arg = draw(st.floats(0.0, 0.95))
+        elif kind == "garbage":
+            arg = draw(st.binary(min_size=0, max_size=64))
+        elif kind in ("json", "cell", "column"):
+            arg = (draw(st.integers(0, 10**6)), draw(WRONG_VALUES))
+        else:
+            arg = draw(st.integers(0, 10**6))
+        out.append((kind, index, arg))
+    return out
+
+
+def _json_paths(data, prefix=()) -> list[tuple]:
+    """Every (path) into nested dicts / lists, the root excluded."""
+    out = []
+    items = data.items() if isinstance(data, dict) else enumerate(data) if isinstance(data, list) else []
+    for key, value in items:
+        out.append((*prefix, key))
+        out.extend(_json_paths(value, (*prefix, key)))
+    return out
+
+
+def _damage(path: Path, kind: str, arg) -> None:
+    if not path.exists():
+        return
+    if kind == "delete":
+        path.unlink()
+    elif kind == "truncate":
+        data = path.read_bytes()
+        path.write_bytes(data[:int(len(data) * arg)])
+    elif kind == "garbage":
+        path.write_bytes(arg)
+    elif kind == "json" and path.suffix == ".json":
+        data = json.loads(path.read_text())
+        paths = [(), *_json_paths(data)]  # () replaces the whole document
+        where = paths[arg[0] % len(paths)]
+        if not where:
+            data = arg[1]
+        else:
+            node = data
+            for key in where[:-1]:
+                node = node[key]
+            node[where[-1]] = arg[1]
+        path.write_text(json.dumps(data))
+    elif kind in ("drop_row", "cell", "column") and path.suffix in (".parquet", ".csv"):
+        df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path, dtype=str)
+        if df.empty:
+            return
+        seed = arg if kind == "drop_row" else arg[0]
+        row = seed % len(df)
+        if kind == "drop_row":
+            df = df.drop(index=df.index[row])
+        elif kind == "column":  # a whole column of the wrong type
+            df[df.columns[seed % len(df.columns)]] = [arg[1]] * len(df)
+        else:
+            col = df.columns[(seed // len(df)) % len(df.columns)]
+            df[col] = df[col].astype(object)
+            df.at[df.index[row], col] = arg[1]
+        try:
+            df.to_parquet(path) if path.suffix == ".parquet" else df.to_csv(path, index=False)
+        except Exception:  # pyarrow cannot store this mix of types: store the column as text instead
+            df = df.astype(str)
+            df.to_parquet(path) if path.suffix == ".parquet" else df.to_csv(path, index=False)
+    elif kind in ("json", "drop_row", "cell", "column"):  # not a table or JSON: flip a byte instead
+        data = bytearray(path.read_bytes())
+        if data:
+            data[arg[0] % len(data) if isinstance(arg, tuple) else arg % len(data)] ^= 0xFF
+            path.write_bytes(bytes(data))
+
+
+def _files(root: Path) -> list[Path]:
+    return sorted(p for p in root.rglob("*") if p.is_file())
+
+
+def _check_outcome(capsys, rc: int, command: str) -> str:
+    err = capsys.readouterr().err
+    assert rc in (0, 2), f"exit code {rc}: {err}"
+    if rc == 2:
+        lines = [line for line in err.splitlines() if line.startswith(f"pin-match {command}: error:")]
+        assert len(lines) == 1 and "Traceback" not in err, err
+    return err
+
+
+# ------------------------------------------------------------------ frame-sets
+@pytest.fixture(scope="module")
+def frameset_files(tiny_frameset):
+    return tiny_frameset.root, [p.relative_to(tiny_frameset.root) for p in _files(tiny_frameset.root)]
+
+
+@settings(max_examples=FRAMESET_CASES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_damaged_frameset_ends_in_a_named_error(frameset_files, capsys, data):
+    source, files = frameset_files
+    plan = data.draw(damages(files))
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp) / "fs"
+        shutil.copytree(source, root)
+        for kind, file, arg in plan:
+            _damage(root / file, kind, arg)
+        out = Path(tmp) / "scores"
+        rc = main(["score", str(root), "--matcher", "test-fuzz-mean", "--out", str(out), "--quiet", "--workers", "1"])
+        _check_outcome(capsys, rc, "score")
+        tables = list(out.rglob("scores_all.parquet")) if out.exists() else []
+        assert not [p for p in out.rglob("*.tmp")] if out.exists() else True
+        if rc != 0:
+            assert not tables  # no table of a failed run
+            return
+        rc = main(["report", str(tables[0]), "--frameset", str(root), "--threshold", "0.3", "--bootstrap", "5",
+                   "--out", str(Path(tmp) / "report")])
+        _check_outcome(capsys, rc, "report")
+        if rc != 0:
+            assert not (Path(tmp) / "report" / "metrics.json").exists() or rc == 0
+
+
+# ------------------------------------------------------------------ recordings
+def _write_recording(root: Path) -> tuple[Path, Path]:
+    import cv2
+
+    from conftest import make_view
+
+    rng = np.random.default_rng(0)
+    objects = root / "objects"
+    descriptions = {}
+    for oid, color in (("obj_t", (200, 20, 20)), ("obj_s", (20, 200, 20)), ("obj_o", (20, 20, 200))):
+        folder = objects / "objects_images" / oid
+        folder.mkdir(parents=True)
+        for k in range(3):
+            cv2.imwrite(str(folder / f"{oid}_{k}.png"), cv2.cvtColor(make_view(color, size=32), cv2.COLOR_RGBA2BGRA))
+        descriptions[oid] = [f"{oid} description {k}" for k in range(3)]
+    (objects / "objects_descriptions.json").write_text(json.dumps(descriptions))
+    rec = root / "rec"
+    rec.mkdir()
+    episodes = [dict(episode_id="7", scene_id="s", split="val", goals=[dict(object_id="obj_t", object_category="mug")],
+                     distractors=[dict(object_id="obj_s", object_category="mug"),
+                                  dict(object_id="obj_o", object_category="ball")])]
+    (rec / "episodes.json").write_text(json.dumps({"episodes": episodes}))
+    for step in range(2):
+        for sub in ("rgb", "semantic", "depth"):
+            (rec / "7" / sub).mkdir(parents=True, exist_ok=True)
+        cv2.imwrite(str(rec / "7" / "rgb" / f"{step}.png"), rng.integers(0, 255, (24, 16, 3), dtype=np.uint8))
+        np.save(rec / "7" / "semantic" / f"{step}.npy",
+                rng.choice([0, 100000, 100001, 100002], size=(24, 16)).astype(np.int64))
+        np.save(rec / "7" / "depth" / f"{step}.npy", rng.uniform(0.5, 5.0, (24, 16)).astype(np.float32))
+    return rec, objects
+
+
+@pytest.fixture(scope="module")
+def recording_files(tmp_path_factory):
+    root = tmp_path_factory.mktemp("recording")
+    _write_recording(root)
+    return root, [p.relative_to(root) for p in _files(root)]
+
+
+@settings(max_examples=RECORDING_CASES, deadline=None, derandomize=True,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@given(data=st.data())
+def test_damaged_recording_ends_in_a_named_error(recording_files, capsys, data):
+    source, files = recording_files
+    plan = data.draw(damages(files))
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp) / "in"
+        shutil.copytree(source, root)
+        for kind, file, arg in plan:
+            _damage(root / file, kind, arg)
+        out = Path(tmp) / "out" / "fs"
+        rc = main(["import", str(root / "rec"), "--objects", str(root / "objects"), "--out", str(out)])
+        _check_outcome(capsys, rc, "import")
+        leftovers = [p.name for p in (Path(tmp) / "out").iterdir()] if (Path(tmp) / "out").exists() else []
+        if rc == 0:
+            assert leftovers == ["fs"]
+        else:
+            assert leftovers == []  # no frame-set, no staging folder
+
