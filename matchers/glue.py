@@ -26,16 +26,7 @@ import cv2
 import numpy as np
 import torch
 
-from matchers.keypoint import (
-    REFERENCE_CANVAS,
-    REFERENCE_PAD,
-    REFERENCE_SIDES,
-    PairMatches,
-    object_points,
-    square_box,
-    take_box,
-    valid_matches,
-)
+from matchers.keypoint import PairMatches, object_points, prepare_references, valid_matches
 from pin_match.matcher import (
     ConfigError,
     CropConfig,
@@ -142,37 +133,6 @@ def build_lightglue(features: str, path: Path, who: str, threshold: float) -> to
 
 
 # ---------------------------------------------------------------------------- references and features
-@dataclass(frozen=True)
-class ColorReference:
-    rgb: np.ndarray   # canvas x canvas x 3 uint8, white background
-    mask: np.ndarray  # canvas x canvas bool, the object's pixels
-
-
-def prepare_color_references(views: Sequence[np.ndarray], pad: int = REFERENCE_PAD, canvas: int = REFERENCE_CANVAS,
-                             sides: Sequence[int] = REFERENCE_SIDES) -> list[ColorReference]:
-    """PIN's reference preparation (``matchers.keypoint.prepare_references``) in colour.
-
-    DISK and ALIKED were trained on RGB images, so the references keep their colours; the
-    geometry (white background, square box padded by ``pad``, each view at every side centred
-    on the canvas, view-major order) is the same, built from the same helpers.
-    """
-    out = []
-    for view in views:
-        alpha = view[..., 3:4].astype(np.float32) / 255.0
-        rgb = np.round(view[..., :3] * alpha + 255.0 * (1.0 - alpha)).astype(np.uint8)
-        box = square_box(view[..., 3] > 0, pad)
-        crop = take_box(rgb, box, 255)
-        mask = take_box((view[..., 3] > 0).astype(np.uint8), box, 0)
-        for side in sides:
-            off = (canvas - side) // 2
-            c = np.full((canvas, canvas, 3), 255, np.uint8)
-            m = np.zeros((canvas, canvas), bool)
-            c[off:off + side, off:off + side] = cv2.resize(crop, (side, side), interpolation=cv2.INTER_AREA)
-            m[off:off + side, off:off + side] = cv2.resize(mask, (side, side), interpolation=cv2.INTER_NEAREST) > 0
-            out.append(ColorReference(rgb=c, mask=m))
-    return out
-
-
 @dataclass
 class Features:
     """One image's keypoints (x, y pixels of that image) and descriptors."""
@@ -268,8 +228,8 @@ class KeypointGlueMatcher(CropMatcher):
         if self._models is None:
             files = weight_files(self.weight_specs(), self.cfg.weights, who)
             self._models = {k: m.to(self.cfg.device).eval() for k, m in self._build(files, who).items()}
-        refs = prepare_color_references(target.views)
-        found = [(self._extract(r.rgb), r.mask) for r in refs]
+        refs = prepare_references(target.views, color=True)
+        found = [(self._extract(r.image), r.mask) for r in refs]
         # a reference without keypoints can match nothing
         self._refs = [(f, f.xy.cpu().numpy(), mask) for f, mask in found if len(f.xy)]
 

@@ -77,30 +77,33 @@ def take_box(image: np.ndarray, box: tuple[int, int, int, int], fill: Any) -> np
 
 @dataclass(frozen=True)
 class ReferenceImage:
-    gray: np.ndarray  # canvas x canvas uint8, white background
-    mask: np.ndarray  # canvas x canvas bool, the object's pixels
+    image: np.ndarray  # canvas x canvas uint8 (grayscale, or x 3 RGB when prepared in colour), white background
+    mask: np.ndarray   # canvas x canvas bool, the object's pixels
 
 
 def prepare_references(views: Sequence[np.ndarray], pad: int = REFERENCE_PAD, canvas: int = REFERENCE_CANVAS,
-                       sides: Sequence[int] = REFERENCE_SIDES) -> list[ReferenceImage]:
+                       sides: Sequence[int] = REFERENCE_SIDES, *, color: bool = False) -> list[ReferenceImage]:
     """PIN's SuperGlue references: white background, square crop around the mask, each view at every side.
 
     The smaller scales are centred on the canvas. Order: view-major (view 0 at every side, then view 1...).
+    Grayscale as SuperPoint reads them; ``color=True`` keeps RGB for detectors trained on colour (DISK, ALIKED).
     """
     out = []
     for view in views:
         alpha = view[..., 3:4].astype(np.float32) / 255.0
         rgb = np.round(view[..., :3] * alpha + 255.0 * (1.0 - alpha)).astype(np.uint8)
         box = square_box(view[..., 3] > 0, pad)
-        gray = cv2.cvtColor(take_box(rgb, box, 255), cv2.COLOR_RGB2GRAY)
+        crop = take_box(rgb, box, 255)
+        if not color:
+            crop = cv2.cvtColor(crop, cv2.COLOR_RGB2GRAY)
         mask = take_box((view[..., 3] > 0).astype(np.uint8), box, 0)
         for side in sides:
             off = (canvas - side) // 2
-            g = np.full((canvas, canvas), 255, np.uint8)
+            image = np.full((canvas, canvas, *crop.shape[2:]), 255, np.uint8)
             m = np.zeros((canvas, canvas), bool)
-            g[off:off + side, off:off + side] = cv2.resize(gray, (side, side), interpolation=cv2.INTER_AREA)
+            image[off:off + side, off:off + side] = cv2.resize(crop, (side, side), interpolation=cv2.INTER_AREA)
             m[off:off + side, off:off + side] = cv2.resize(mask, (side, side), interpolation=cv2.INTER_NEAREST) > 0
-            out.append(ReferenceImage(gray=g, mask=m))
+            out.append(ReferenceImage(image=image, mask=m))
     return out
 
 
@@ -325,7 +328,7 @@ class GlueMatcher(CropMatcher):
             model = load_pretrained(self.weights_spec, self.cfg.weights, f"matcher {self.display_name}", self._load)
             self._model = model.to(self.cfg.device).eval()
         refs = prepare_references(target.views)
-        found = detect(self._model.keypoint_detector, [r.gray for r in refs], self.cfg.device)
+        found = detect(self._model.keypoint_detector, [r.image for r in refs], self.cfg.device)
         # a reference without keypoints can match nothing; leaving it out keeps the pair batch well-formed
         self._refs = [(k, k.xy.cpu().numpy(), r.mask) for k, r in zip(found, refs) if len(k.xy)]
 

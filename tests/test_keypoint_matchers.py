@@ -64,11 +64,11 @@ def test_six_references_white_background_mask_scaled_into_the_canvas():
     assert len(refs) == 6
     kernel = np.ones((5, 5), np.uint8)  # resampling blends the 2 px along the edge
     for ref in refs:
-        assert ref.gray.shape == ref.mask.shape == (360, 360) and ref.gray.dtype == np.uint8
+        assert ref.image.shape == ref.mask.shape == (360, 360) and ref.image.dtype == np.uint8
         near = cv2.dilate(ref.mask.astype(np.uint8), kernel) > 0
         inner = cv2.erode(ref.mask.astype(np.uint8), kernel) > 0
-        assert (ref.gray[~near] == 255).all()  # background and padding are white
-        assert (ref.gray[inner] == 0).all()    # the black object keeps its colour
+        assert (ref.image[~near] == 255).all()  # background and padding are white
+        assert (ref.image[inner] == 0).all()    # the black object keeps its colour
     # crop (0, 70)-(160, 230) scaled by 360 / 160 = 2.25: object x 112.5-247.5, y 67.5-292.5
     ys, xs = np.nonzero(refs[0].mask)
     assert abs(xs.min() - 112.5) <= 1 and abs(xs.max() + 1 - 247.5) <= 1
@@ -85,7 +85,7 @@ def test_reference_crop_leaving_the_view_is_padded_white():
     # crop (-30, -30)-(130, 130): the object starts 30 / 160 * 360 = 67.5 px in, all else is white
     ys, xs = np.nonzero(ref.mask)
     assert abs(xs.min() - 67.5) <= 1 and abs(ys.min() - 67.5) <= 1
-    assert (ref.gray[:60, :] == 255).all() and (ref.gray[:, :60] == 255).all()
+    assert (ref.image[:60, :] == 255).all() and (ref.image[:, :60] == 255).all()
 
 
 @pytest.mark.parametrize("normalize", [superglue_normalize, lightglue_normalize])
@@ -402,11 +402,11 @@ def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, su
     refs = prepare_references(target.views)
     obs = corner_keypoints(None, [cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)], "cpu")[0]
     expected = []
-    for ref in corner_keypoints(None, [r.gray for r in refs], "cpu"):
+    for ref in corner_keypoints(None, [r.image for r in refs], "cpu"):
         conf = reference_superglue(m._model, (obs.xy, obs.scores, obs.descriptors, obs.height, obs.width),
                                    (ref.xy, ref.scores, ref.descriptors, ref.height, ref.width), iterations, 0.05)
         expected.append(conf.sum())
-    assert len({len(k.xy) for k in (obs, *corner_keypoints(None, [r.gray for r in refs], "cpu"))}) > 2
+    assert len({len(k.xy) for k in (obs, *corner_keypoints(None, [r.image for r in refs], "cpu"))}) > 2
     assert min(expected) > 0.5  # real matches in every reference, so the comparison means something
     np.testing.assert_allclose(sums["sum"], expected, rtol=1e-4)
     assert sums["sum_score"] == pytest.approx(sum(expected), rel=1e-4)
