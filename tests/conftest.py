@@ -79,3 +79,20 @@ def real_frameset(tmp_path_factory):
     from pin_match.realset import build
 
     return build(tmp_path_factory.mktemp("real") / "realset")
+
+
+@pytest.fixture(scope="module")
+def dino_cfg(tmp_path_factory):
+    """The tiny timm ViT at 64 px: a 4 x 4 patch grid of 64-dim tokens (feature store and training tests)."""
+    from tiny_weights import save_tiny_timm_vit
+
+    return dict(model_name="test_vit", img_size=64, weights=str(save_tiny_timm_vit(tmp_path_factory.mktemp("vit"))))
+
+
+@pytest.fixture(scope="module")
+def store(tiny_frameset, dino_cfg, tmp_path_factory):
+    """A feature store of the tiny frame-set under the tiny ViT."""
+    from pin_match.features import build_features
+
+    return build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path_factory.mktemp("features"),
+                          progress=False)

@@ -8,25 +8,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from tiny_weights import save_tiny_timm_vit
 
 from matchers.patch import alpha_to_grid
 from pin_match.cli import main
 from pin_match.crops import crop_boxes
 from pin_match.features import FeatureStore, FeatureStoreError, build_features, patch_coverage, patch_matcher
 from pin_match.frameset_writer import FrameSetWriter
-
-
-@pytest.fixture(scope="module")
-def dino_cfg(tmp_path_factory):
-    """The tiny timm ViT at 64 px: a 4 x 4 patch grid of 64-dim tokens."""
-    return dict(model_name="test_vit", img_size=64, weights=str(save_tiny_timm_vit(tmp_path_factory.mktemp("vit"))))
-
-
-@pytest.fixture(scope="module")
-def store(tiny_frameset, dino_cfg, tmp_path_factory):
-    return build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path_factory.mktemp("features"),
-                          progress=False)
 
 
 def test_tokens_are_the_backbones_on_every_crop_and_reference(store, tiny_frameset, dino_cfg):

@@ -15,12 +15,10 @@ import numpy as np
 import pytest
 import torch
 from safetensors.torch import load_file
-from tiny_weights import save_tiny_timm_vit
 
 import pin_match
 from pin_match import create_matcher
 from pin_match.cli import main
-from pin_match.features import build_features
 from pin_match.frameset_writer import FrameSetWriter
 from pin_match.head import ProjectionHead, load_head
 from pin_match.scoring import score
@@ -29,17 +27,6 @@ from pin_match.training import TrainConfig, TrainingError, store_frame_scores, t
 from pin_match.weights import WeightsError
 
 FAST = dict(hidden=16, batch_crops=4, patience=100, threads=1)
-
-
-@pytest.fixture(scope="module")
-def dino_cfg(tmp_path_factory):
-    return dict(model_name="test_vit", img_size=64, weights=str(save_tiny_timm_vit(tmp_path_factory.mktemp("vit"))))
-
-
-@pytest.fixture(scope="module")
-def store(tiny_frameset, dino_cfg, tmp_path_factory):
-    return build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path_factory.mktemp("features"),
-                          progress=False)
 
 
 @pytest.fixture(scope="module")
