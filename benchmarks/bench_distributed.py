@@ -20,9 +20,9 @@ import time
 from pathlib import Path
 
 from benchmarks.framesets import synthetic
-from pin_match.distributed import connect
-from pin_match.registry import create_matcher, list_matchers
+from pin_match.contract.registry import create_matcher, list_matchers
 from pin_match.scoring import Shard, score_to_file
+from pin_match.scoring.cluster import connect
 
 
 def run(quick: bool = False) -> dict:

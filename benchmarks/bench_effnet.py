@@ -19,7 +19,7 @@ import torch
 from benchmarks.framesets import real_photos
 from matchers.backbones import squash_batch
 from pin_match import create_matcher
-from pin_match.crops import crop_boxes
+from pin_match.contract.crops import crop_boxes
 from pin_match.scoring import score
 
 

@@ -17,8 +17,8 @@ from pathlib import Path
 import torch
 
 from benchmarks.framesets import synthetic
-from pin_match.crops import crop_boxes
-from pin_match.registry import create_matcher
+from pin_match.contract.crops import crop_boxes
+from pin_match.contract.registry import create_matcher
 from pin_match.scoring import score_to_file
 
 BATCH = 8  # frames per batch = 16 crops per forward

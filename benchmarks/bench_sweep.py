@@ -12,8 +12,8 @@ import time
 import numpy as np
 import pandas as pd
 
-from pin_match.metrics import frame_arrays
-from pin_match.sweep import sweep, sweep_loop
+from pin_match.evaluation.metrics import frame_arrays
+from pin_match.evaluation.sweep import sweep, sweep_loop
 
 
 def synthetic_scored(n_frames: int, n_episodes: int, seed: int = 0) -> pd.DataFrame:

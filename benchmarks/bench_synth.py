@@ -16,8 +16,8 @@ from pathlib import Path
 
 def _time_frames(n: int) -> float:
     """Seconds per rendered episode frame (render + mask + camera effects + encoding), one process."""
-    from pin_match.synth.generate import EpisodePlan, plan_episodes, render_episode
-    from pin_match.synth.objects import make_objects, stable_seed
+    from pin_match.data.synth.generate import EpisodePlan, plan_episodes, render_episode
+    from pin_match.data.synth.objects import make_objects, stable_seed
 
     specs = make_objects(0, 4)
     episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]
@@ -32,8 +32,8 @@ def _time_frames(n: int) -> float:
 
 
 def _time_references(n: int) -> float:
-    from pin_match.synth.generate import render_object
-    from pin_match.synth.objects import make_objects
+    from pin_match.data.synth.generate import render_object
+    from pin_match.data.synth.objects import make_objects
 
     specs = make_objects(0, 2)[::2][:n]
     render_object(specs[0])
@@ -44,7 +44,7 @@ def _time_references(n: int) -> float:
 
 
 def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:
-    from pin_match.synth import generate
+    from pin_match.data.synth import generate
 
     with tempfile.TemporaryDirectory() as tmp:
         t0 = time.perf_counter()

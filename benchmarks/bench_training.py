@@ -30,8 +30,8 @@ BACKBONE_CFG = {"effnet": dict(img_size=320, layer="blocks.4")}
 
 
 def _frameset(quick: bool):
-    from pin_match.frameset import FrameSet
-    from pin_match.synth import generate
+    from pin_match.data.frameset import FrameSet
+    from pin_match.data.synth import generate
 
     sizes = QUICK if quick else SYNTH
     root = CACHE / ("training_quick" if quick else "training_synth{episodes}".format(**sizes))
@@ -42,12 +42,12 @@ def _frameset(quick: bool):
 
 def _real_frameset():
     try:
-        from pin_match.realset import build
+        from pin_match.data.realset import build
     except ImportError:
         return None
     root = CACHE / "realset"
     if (root / "frameset.json").exists():
-        from pin_match.frameset import FrameSet
+        from pin_match.data.frameset import FrameSet
 
         return FrameSet.load(root)
     return build(root, seed=0)
@@ -74,10 +74,10 @@ def _print(title: str, rows: list[dict]) -> None:
 
 
 def run(quick: bool = False) -> dict:
-    from pin_match.features import build_features
-    from pin_match.head import load_head
-    from pin_match.train_config import default_backbone
+    from pin_match.nn.head import load_head
     from pin_match.training import TrainConfig, compare_with_frozen, scored_from_store, train, tuned_sigma
+    from pin_match.training.config import default_backbone
+    from pin_match.training.features import build_features
 
     torch.set_num_threads(THREADS)
     backbone = default_backbone()

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pin_match.frameset import FrameSet
-from pin_match.frameset_writer import FrameSetWriter
+from pin_match.data.frameset import FrameSet
+from pin_match.data.writer import FrameSetWriter
 
 CACHE = Path("pin_match_runs") / "benchmarks"
 
@@ -17,8 +17,8 @@ def synthetic(episodes: int, name: str) -> FrameSet:
 
     The default size is the demo's own frame-set, reused when ``pin-match demo`` made it.
     """
-    from pin_match.bench import DEMO_OUT
-    from pin_match.synth import DEFAULTS, generate
+    from pin_match.data.synth import DEFAULTS, generate
+    from pin_match.evaluation.bench import DEMO_OUT
 
     if episodes == DEFAULTS["episodes"] and (DEMO_OUT / "frameset" / "frameset.json").exists():
         return FrameSet.load(DEMO_OUT / "frameset")
@@ -55,7 +55,7 @@ def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> F
 
 def real_photos(seed: int = 0) -> FrameSet:
     """The real-photo frame-set (``pin-match realset``; needs scikit-image), cached per seed."""
-    from pin_match.realset import build
+    from pin_match.data.realset import build
 
     root = CACHE / ("realset" if seed == 0 else f"realset_seed{seed}")
     if (root / "frameset.json").exists():

@@ -12,7 +12,7 @@ an entry point so pin_match finds it on its own::
 This template is a working matcher: the mean colour of the target against the mean
 colour of image patches. It is registered under "template-mean-color" only when this
 file is imported, so it never appears in a normal ``pin-match list``. Test yours with
-``pin_match.testing.check_matcher("my-matcher")``.
+``pin_match.contract.testing.check_matcher("my-matcher")``.
 """
 
 from __future__ import annotations
@@ -22,7 +22,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-from pin_match import CropConfig, CropMatcher, MatchResult, Modality, Target, register_matcher
+from pin_match.contract import CropConfig, CropMatcher, MatchResult, Modality, Target, register_matcher
 
 
 @dataclass

@@ -18,7 +18,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.contract import WeightsError, WeightsSpec
 
 # checkpoint names looked for, in order, when ``weights=`` names a folder (what the libraries save)
 TIMM_FILES = ("model.safetensors", "pytorch_model.bin", "model.pth")

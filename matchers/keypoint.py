@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from matchers.hf_load import load_pretrained
-from pin_match.matcher import (
+from pin_match.contract import (
     ConfigError,
     CropConfig,
     CropMatcher,
@@ -32,11 +32,14 @@ from pin_match.matcher import (
     MatchResult,
     Modality,
     Target,
+    WeightsError,
+    WeightsSpec,
+    create_matcher,
     crops_field,
+    get_matcher_class,
+    register_matcher,
     weights_field,
 )
-from pin_match.registry import create_matcher, get_matcher_class, register_matcher
-from pin_match.weights import WeightsError, WeightsSpec
 
 SUPERGLUE_WEIGHTS = WeightsSpec("magic-leap-community/superglue_indoor",
                                 license="Magic Leap non-commercial research license (SuperPoint and SuperGlue)")

@@ -15,11 +15,17 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from matchers.patch import ReferencePrototypeMatcher
-from pin_match.errors import PinMatchError
-from pin_match.matcher import CropConfig, MatcherConfig, weights_field
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec, misfit
+from matchers.patch import ReferencePrototypeMatcher, patch_matcher
+from pin_match.contract import (
+    CropConfig,
+    MatcherConfig,
+    PinMatchError,
+    WeightsError,
+    WeightsSpec,
+    misfit,
+    register_matcher,
+    weights_field,
+)
 
 
 @dataclass
@@ -52,7 +58,7 @@ class LearnedMatcher(ReferencePrototypeMatcher):
     def __init__(self, cfg: MatcherConfig | None = None, **kwargs) -> None:
         super().__init__(cfg, **kwargs)
         if self.cfg.weights is not None and (Path(self.cfg.weights).expanduser() / "config.json").is_file():
-            from pin_match.head import read_head_config
+            from pin_match.nn.head import read_head_config
 
             sigma = read_head_config(Path(self.cfg.weights).expanduser()).get("sigma")
             if sigma is not None:  # the sigma tuned at training time, on held-out train objects
@@ -72,8 +78,7 @@ class LearnedMatcher(ReferencePrototypeMatcher):
         return self._backbone
 
     def _build_backbone(self):
-        from pin_match.features import patch_matcher
-        from pin_match.head import HeadBackbone, HeadError, load_head
+        from pin_match.nn.head import HeadBackbone, HeadError, load_head
 
         folder = self.weights_spec.local_path(self.cfg.weights)
         if folder is None:
@@ -84,7 +89,7 @@ class LearnedMatcher(ReferencePrototypeMatcher):
         except HeadError as exc:
             raise WeightsError(f"matcher {self.display_name}: {exc}") from exc
         overrides = dict(config.get("backbone_cfg") or {})
-        base = patch_matcher(config["backbone"], overrides)
+        base = patch_matcher(config["backbone"], **overrides)
         if base.id != config.get("backbone_id"):
             raise WeightsError(f"matcher {self.display_name}: head {folder} was trained on "
                                f"{config.get('backbone_id')}, but {config['backbone']} with its recorded config is "

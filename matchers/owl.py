@@ -24,7 +24,7 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.matcher import (
+from pin_match.contract import (
     ConfigError,
     CropConfig,
     CropMatcher,
@@ -33,10 +33,10 @@ from pin_match.matcher import (
     MatchResult,
     Modality,
     Target,
+    WeightsSpec,
+    register_matcher,
     weights_field,
 )
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsSpec
 
 WEIGHTS = WeightsSpec("google/owlvit-base-patch32", license="Apache-2.0")
 QUERIES = ("descriptions", "category")

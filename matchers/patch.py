@@ -29,7 +29,7 @@ from matchers.backbones import (
     TimmBackbone,
     resolve_checkpoint,
 )
-from pin_match.matcher import (
+from pin_match.contract import (
     ConfigError,
     CropConfig,
     CropMatcher,
@@ -38,10 +38,14 @@ from pin_match.matcher import (
     MatchResult,
     Modality,
     Target,
+    WeightsError,
+    WeightsSpec,
+    create_matcher,
+    misfit,
+    register_matcher,
     weights_field,
 )
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsError, WeightsSpec, misfit
+from pin_match.nn.prototypes import masked_mean
 
 # ------------------------------------------------------------------------------------------ math
 
@@ -58,12 +62,6 @@ def alpha_to_grid(alpha: np.ndarray, grid: int) -> torch.Tensor:
     if float(weights.sum()) <= 0.0:
         weights = F.adaptive_avg_pool2d(a, (grid, grid))[0, 0]
     return weights
-
-
-def reference_prototype(patches: torch.Tensor, weights: torch.Tensor) -> torch.Tensor:
-    """Mask-weighted mean of one view's patch tokens: sum(mask x token) / sum(mask); (N, D), (g, g) -> (D,)."""
-    w = weights.reshape(-1, 1).to(patches.dtype)
-    return (w * patches).sum(0) / w.sum()
 
 
 def patch_similarity(patches: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
@@ -199,8 +197,8 @@ class ReferencePrototypeMatcher(PatchSimilarityMatcher):
     def _target_vectors(self, target: Target) -> torch.Tensor:
         backbone = self.backbone
         feats = backbone.encode([v[..., :3] for v in target.views]).patches
-        return torch.stack([reference_prototype(p, alpha_to_grid(v[..., 3], backbone.grid))
-                            for p, v in zip(feats, target.views)])
+        alpha = torch.stack([alpha_to_grid(v[..., 3], backbone.grid).reshape(-1) for v in target.views])
+        return masked_mean(feats, alpha)
 
 
 # ------------------------------------------------------------------------------------------ timm: DINO, DINOv2
@@ -312,3 +310,15 @@ class ClipTextMatcher(PatchSimilarityMatcher):
             raise MatcherError(f"matcher {self.display_name}: backbone {type(backbone).__name__} has no text encoder")
         text: TextBackbone = backbone
         return torch.stack([text_target(text.encode_text, d, OPENAI_IMAGENET_TEMPLATES) for d in target.descriptions])
+
+
+def patch_matcher(name: str, **overrides) -> PatchSimilarityMatcher:
+    """The registered matcher ``name``, refused unless it has patch tokens (effnet, dino, dinov2, clip ...).
+
+    Feature stores and trained heads need a backbone's patch tokens; sift, color or owl have none.
+    """
+    matcher = create_matcher(name, **overrides)
+    if not isinstance(matcher, PatchSimilarityMatcher):
+        raise ConfigError(f"matcher {name!r} has no patch features (it is not a patch-similarity matcher); "
+                          f"choose a patch backbone such as effnet, dino, dinov2 or clip")
+    return matcher

@@ -36,9 +36,17 @@ import torch
 import torch.nn.functional as F
 
 from matchers.hf_load import load_pretrained
-from pin_match.matcher import ConfigError, CropConfig, CropMatcher, MatchResult, Modality, Target, weights_field
-from pin_match.registry import register_matcher
-from pin_match.weights import WeightsSpec
+from pin_match.contract import (
+    ConfigError,
+    CropConfig,
+    CropMatcher,
+    MatchResult,
+    Modality,
+    Target,
+    WeightsSpec,
+    register_matcher,
+    weights_field,
+)
 
 WEIGHTS = WeightsSpec("facebook/sam-vit-base", license="Apache-2.0")
 PAPER = "Personalize Segment Anything Model with One Shot (Zhang et al., ICLR 2024)"

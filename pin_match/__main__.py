@@ -1,5 +1,5 @@
 import sys
 
-from pin_match.cli import main
+from pin_match.cli.main import main
 
 sys.exit(main())

@@ -39,7 +39,7 @@ def tiny_frameset(tmp_path_factory):
     Per episode, frame 0 shows the target, frame 1 a same-category distractor, frame 2 an
     other-category distractor, frame 3 nothing.
     """
-    from pin_match.frameset_writer import FrameSetWriter
+    from pin_match.data.writer import FrameSetWriter
 
     root = tmp_path_factory.mktemp("fs") / "tiny"
     w = FrameSetWriter(root, "tiny")
@@ -74,9 +74,9 @@ def tiny_frameset(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def real_frameset(tmp_path_factory):
-    """The real-photo frame-set (pin_match.realset, seed 0): built once per session from scikit-image's photos."""
+    """The real-photo frame-set (pin_match.data.realset, seed 0): built once per session from scikit-image's photos."""
     pytest.importorskip("skimage")
-    from pin_match.realset import build
+    from pin_match.data.realset import build
 
     return build(tmp_path_factory.mktemp("real") / "realset")
 
@@ -92,7 +92,7 @@ def dino_cfg(tmp_path_factory):
 @pytest.fixture(scope="module")
 def store(tiny_frameset, dino_cfg, tmp_path_factory):
     """A feature store of the tiny frame-set under the tiny ViT."""
-    from pin_match.features import build_features
+    from pin_match.training.features import build_features
 
     return build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path_factory.mktemp("features"),
                           progress=False)

@@ -16,9 +16,9 @@ import pytest
 
 from conftest import make_view
 from pin_match import Target, create_matcher
-from pin_match.labels import frame_labels, scored_frames
+from pin_match.data.synth import DEFAULTS, generate
+from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.scoring import score
-from pin_match.synth import DEFAULTS, generate
 
 
 @pytest.fixture(scope="module")

@@ -10,10 +10,10 @@ from tiny_weights import save_tiny_hf_clip
 
 from conftest import make_view
 from matchers.clip_grad import WEIGHTS, ClipGradMatcher, relevance
-from pin_match.crops import crop_boxes
-from pin_match.matcher import Modality, Target
-from pin_match.registry import create_matcher, get_matcher_class
-from pin_match.weights import WeightsError
+from pin_match.contract.crops import crop_boxes
+from pin_match.contract.matcher import Modality, Target
+from pin_match.contract.registry import create_matcher, get_matcher_class
+from pin_match.contract.weights import WeightsError
 
 
 @pytest.fixture(scope="module")

@@ -1,6 +1,6 @@
 """Every registered matcher honours the contract, checked by the same function plug-in authors call.
 
-``pin_match.testing.check_matcher`` runs on every name the registry knows (built-ins and
+``pin_match.contract.testing.check_matcher`` runs on every name the registry knows (built-ins and
 installed entry points) with the tiny local weights of ``tests/tiny_weights.py``; a matcher
 that needs weights and has no entry there fails here, so no matcher escapes the contract.
 """
@@ -12,8 +12,8 @@ import pytest
 from tiny_weights import tiny_overrides
 
 from pin_match import CropConfig, CropMatcher, MatchResult, Modality, Target, register_matcher
-from pin_match.registry import available_names
-from pin_match.testing import ContractError, check_matcher, contract_frames, contract_target
+from pin_match.contract.registry import available_names
+from pin_match.contract.testing import ContractError, check_matcher, contract_frames, contract_target
 
 
 @pytest.fixture(scope="module")

@@ -3,8 +3,8 @@
 import numpy as np
 import pytest
 
-from pin_match.crops import Crop, crop_boxes
-from pin_match.matcher import MatchResult, merge_crop_results
+from pin_match.contract.crops import Crop, crop_boxes
+from pin_match.contract.matcher import MatchResult, merge_crop_results
 
 
 def test_pin_policy_on_a_pin_frame_is_rows_0_360_and_280_640():

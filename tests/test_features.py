@@ -9,16 +9,17 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from matchers.patch import alpha_to_grid
+from matchers.patch import alpha_to_grid, patch_matcher
 from pin_match.cli import main
-from pin_match.crops import crop_boxes
-from pin_match.features import FeatureStore, FeatureStoreError, build_features, patch_coverage, patch_matcher
-from pin_match.frameset_writer import FrameSetWriter
+from pin_match.contract import ConfigError
+from pin_match.contract.crops import crop_boxes
+from pin_match.data.writer import FrameSetWriter
+from pin_match.training.features import FeatureStore, FeatureStoreError, build_features, patch_coverage
 
 
 def test_tokens_are_the_backbones_on_every_crop_and_reference(store, tiny_frameset, dino_cfg):
     fs = tiny_frameset
-    backbone = patch_matcher("dino", dino_cfg).backbone
+    backbone = patch_matcher("dino", **dino_cfg).backbone
     assert store.meta["frameset_fingerprint"] == fs.fingerprint and store.grid == 4 and store.dim == 64
     assert len(store.crops) == 2 * len(fs.frames)  # PIN's two square crops per 640x360 frame
     assert store.frames.dtype == np.float16 and isinstance(store.frames, np.memmap)
@@ -82,7 +83,7 @@ def test_a_store_for_another_frame_set_is_refused(store, tmp_path):
 
 
 def test_a_matcher_without_patch_features_is_refused(tiny_frameset, tmp_path):
-    with pytest.raises(FeatureStoreError, match="matcher 'color' has no patch features"):
+    with pytest.raises(ConfigError, match="matcher 'color' has no patch features"):
         build_features(tiny_frameset, "color", out=tmp_path, progress=False)
 
 

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.frameset import FrameSet, FrameSetError, read_image
-from pin_match.frameset_writer import FrameSetWriter
+from pin_match.data.frameset import FrameSet, FrameSetError, read_image
+from pin_match.data.writer import FrameSetWriter
 
 
 def test_round_trip_tables_and_pixels(tiny_frameset):

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from pin_match import Target, create_matcher
-from pin_match.weights import WeightsError
+from pin_match.contract.weights import WeightsError
 
 GLUES = ("disk-lightglue", "aliked-lightglue", "xfeat")
 SMALL = dict(max_side=320, max_keypoints=256)  # a few seconds per frame for DISK / ALIKED on two cores
@@ -186,14 +186,14 @@ def test_weights_of_another_architecture_are_refused(tmp_path):
 @pytest.fixture(scope="module")
 def realset_fs(tmp_path_factory):
     pytest.importorskip("skimage")
-    from pin_match.realset import build
+    from pin_match.data.realset import build
 
     return build(tmp_path_factory.mktemp("realset") / "fs")
 
 
 def ranking_on(fs, name: str, tmp_path, **overrides) -> dict[str, float]:
-    from pin_match.labels import frame_labels, scored_frames
-    from pin_match.metrics import frame_arrays, ranking_metrics
+    from pin_match.evaluation.labels import frame_labels, scored_frames
+    from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
     from pin_match.scoring import score
 
     table = score(fs, name, overrides=overrides, out=tmp_path / "scores", progress=False)

@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 from conftest import make_view
-from pin_match.frameset import FrameSetError
-from pin_match.importer import import_recording
+from pin_match.data.frameset import FrameSetError
+from pin_match.data.importer import import_recording
 
 
 @pytest.fixture

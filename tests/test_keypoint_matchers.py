@@ -21,9 +21,9 @@ from matchers.keypoint import (
     to_frame_of,
     valid_matches,
 )
-from pin_match import registry
-from pin_match.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
-from pin_match.registry import create_matcher
+from pin_match.contract import registry
+from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
+from pin_match.contract.registry import create_matcher
 
 
 @pytest.fixture(scope="module")

@@ -11,9 +11,9 @@ from pathlib import Path
 
 import pytest
 
-from pin_match.analysis import AnalysisError, load_bench
-from pin_match.bench import bench
-from pin_match.synth import generate
+from pin_match.data.synth import generate
+from pin_match.evaluation.analysis import AnalysisError, load_bench
+from pin_match.evaluation.bench import bench
 
 REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPO / "notebooks").glob("[0-9][0-9]_*.ipynb"))

@@ -8,8 +8,8 @@ from tiny_weights import save_tiny_owl
 
 from conftest import make_view
 from matchers.owl import clip_tokenizer, closest_reference, owl_verdict
-from pin_match.matcher import ConfigError, MatcherError, Modality, Target
-from pin_match.registry import create_matcher
+from pin_match.contract.matcher import ConfigError, MatcherError, Modality, Target
+from pin_match.contract.registry import create_matcher
 
 
 @pytest.fixture(scope="module")

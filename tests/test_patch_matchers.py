@@ -20,8 +20,9 @@ from matchers.patch import (
     patch_centres,
 )
 from pin_match import Modality, Target, create_matcher
-from pin_match.registry import get_matcher_class
-from pin_match.weights import WeightsError
+from pin_match.contract.registry import get_matcher_class
+from pin_match.contract.weights import WeightsError
+from pin_match.evaluation.sigma import PAPER_THRESHOLDS
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("dino", "dinov2", "clip", "clip-text")
@@ -199,7 +200,7 @@ def test_embed_reference_is_the_backbone_global_vector():
 
 
 def test_registered_names_modalities_and_paper_sigmas():
-    paper = json.loads((ROOT / "thresholds" / "paper.json").read_text())["thresholds"]
+    paper = json.loads(PAPER_THRESHOLDS.read_text())["thresholds"]
     for name, cls in zip(NAMES, (DinoMatcher, Dinov2Matcher, ClipMatcher, ClipTextMatcher)):
         assert get_matcher_class(name) is cls
         assert cls.default_sigma == paper[name]["sigma"]

@@ -69,8 +69,8 @@ def _cli(args: list[str], plugin_path: Path, cwd: Path) -> subprocess.CompletedP
 
 
 def test_entry_point_name_never_renames_the_class(plugin_path, monkeypatch):
-    from pin_match.registry import create_matcher, list_matchers
-    from pin_match.testing import check_matcher
+    from pin_match.contract.registry import create_matcher, list_matchers
+    from pin_match.contract.testing import check_matcher
 
     monkeypatch.syspath_prepend(str(plugin_path))
     assert "grayhist" in list_matchers("gray*")

@@ -10,8 +10,8 @@ import pytest
 
 pytest.importorskip("skimage")
 
-from pin_match import realset  # noqa: E402
-from pin_match.frameset import FrameSet  # noqa: E402
+from pin_match.data import realset  # noqa: E402
+from pin_match.data.frameset import FrameSet  # noqa: E402
 
 SEED = 3
 

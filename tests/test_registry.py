@@ -19,8 +19,8 @@ from pin_match import (
     register_matcher,
     registry,
 )
-from pin_match.matcher import ConfigError, MatcherError
-from pin_match.registry import UnknownMatcherError, parse_overrides
+from pin_match.contract.matcher import ConfigError, MatcherError
+from pin_match.contract.registry import UnknownMatcherError, parse_overrides
 
 
 @dataclass

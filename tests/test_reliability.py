@@ -20,10 +20,10 @@ import slow_plugin  # noqa: F401  (registers test-slow)
 from conftest import make_view
 from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.cli import main
-from pin_match.frameset import FrameSet
-from pin_match.frameset_writer import FrameSetWriter
-from pin_match.scoretable import ScoreTable, ScoreTableError
+from pin_match.data.frameset import FrameSet
+from pin_match.data.writer import FrameSetWriter
 from pin_match.scoring import score
+from pin_match.scoring.table import ScoreTable, ScoreTableError
 
 
 @dataclass

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 import pytest
 
-from pin_match.scoretable import ScoreTable, ScoreTableError
+from pin_match.scoring.table import ScoreTable, ScoreTableError
 
 
 def _table(score: float) -> ScoreTable:

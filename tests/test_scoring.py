@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 import slow_plugin  # noqa: F401  (registers test-slow)
 
-from pin_match.scoretable import ScoreTable
 from pin_match.scoring import Shard, merge, score
+from pin_match.scoring.table import ScoreTable
 
 TESTS = Path(__file__).parent
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pin_match.matcher import Matcher
-from pin_match.similarity import similarity, similarity_tables, write_similarity
+from pin_match.contract.matcher import Matcher
+from pin_match.evaluation.similarity import similarity, similarity_tables, write_similarity
 
 # val objects of the tiny frame-set; lengths differ on purpose (cosine must normalise)
 EMBEDDINGS = {"mug_c": [1.0, 0.0, 0.0], "mug_d": [3.0, 4.0, 0.0], "ball_b": [0.6, 0.0, 0.8]}

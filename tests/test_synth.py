@@ -8,8 +8,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from pin_match.synth import CATEGORIES, generate
-from pin_match.synth.objects import make_objects
+from pin_match.data.synth import CATEGORIES, generate
+from pin_match.data.synth.objects import make_objects
 
 SMALL = dict(seed=3, episodes=4, objects_per_category=4, frames_per_episode=8)
 
@@ -116,7 +116,7 @@ def test_episodes_have_same_category_distractors(synth):
 
 
 def test_refuses_existing_output(synth):
-    from pin_match.frameset import FrameSetError
+    from pin_match.data.frameset import FrameSetError
 
     with pytest.raises(FrameSetError, match="already exists"):
         generate(synth.root, **SMALL)
@@ -129,7 +129,7 @@ BIG = [(0.45, 0.8), (0.4, 0.7), (0.39, 0.65), (0.33, 0.94), (0.3, 0.6)] * 2 + [(
 @pytest.mark.parametrize("seed", range(40))
 def test_every_room_takes_twelve_large_objects(seed):
     """Sizes the surfaces of most rooms cannot hold: the floor along the walls takes the rest, validly."""
-    from pin_match.synth.scene import _overlaps, make_room, place_objects
+    from pin_match.data.synth.scene import _overlaps, make_room, place_objects
 
     room = make_room(np.random.default_rng(seed))
     spots = place_objects(room, BIG, np.random.default_rng(seed + 1000))

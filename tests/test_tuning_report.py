@@ -9,12 +9,12 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import EvaluationError
-from pin_match.labels import LabelError, frame_labels, localisation_hits, scored_frames
-from pin_match.report import report
-from pin_match.scoretable import ScoreTable
-from pin_match.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
-from pin_match.tables import Row, latex_table, markdown_table, report_row, side_by_side, tuning_row
-from pin_match.tuning import OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.evaluation.labels import LabelError, frame_labels, localisation_hits, scored_frames
+from pin_match.evaluation.report import report
+from pin_match.evaluation.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
+from pin_match.evaluation.tables import Row, latex_table, markdown_table, report_row, side_by_side, tuning_row
+from pin_match.evaluation.tuning import OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.scoring.table import ScoreTable
 
 ON_TARGET = (148.0, 348.0)  # centre of the disc painted at (100, 300) with radius ~38 px
 OFF_TARGET = (10.0, 10.0)

@@ -8,7 +8,7 @@ import safetensors.torch
 
 from conftest import make_view
 from pin_match import Target, create_matcher
-from pin_match.weights import WeightsError, WeightsSpec
+from pin_match.contract.weights import WeightsError, WeightsSpec
 
 
 def _target() -> Target:
@@ -71,6 +71,6 @@ def test_carrier_package_missing_or_damaged_is_named(monkeypatch, tmp_path):
     (tmp_path / "fake_carrier" / "w").mkdir()
     (tmp_path / "fake_carrier" / "w" / "model.pth").write_bytes(b"not a torch file")
     assert lacking.resolve(None) == tmp_path / "fake_carrier" / "w" / "model.pth"
-    from pin_match.weights import load_torch_state
+    from pin_match.contract.weights import load_torch_state
     with pytest.raises(WeightsError, match=r"cannot read the checkpoint .*model.pth \(damaged"):
         load_torch_state(lacking.resolve(None), "matcher x")

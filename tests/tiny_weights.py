@@ -121,10 +121,10 @@ def save_tiny_sam(path: Path) -> str:
 
 def save_tiny_head(path: Path, backbone: str, backbone_cfg: dict, hidden: int = 8) -> str:
     """A random (not identity) projection head for the tiny backbone, in the folder layout pin-match train writes."""
-    from pin_match.features import patch_matcher
-    from pin_match.head import HEAD_FORMAT, HEAD_VERSION, ProjectionHead, save_head
+    from matchers.patch import patch_matcher
+    from pin_match.nn.head import HEAD_FORMAT, HEAD_VERSION, ProjectionHead, save_head
 
-    base = patch_matcher(backbone, backbone_cfg)
+    base = patch_matcher(backbone, **backbone_cfg)
     dim = int(base.backbone.encode([torch.zeros(8, 8, 3, dtype=torch.uint8).numpy()]).patches.shape[-1])
     torch.manual_seed(0)
     head = ProjectionHead(dim, hidden)

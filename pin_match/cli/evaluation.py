@@ -1,0 +1,171 @@
+"""The evaluation half of the CLI: tune, report, similarity, bench, demo (no model needed except similarity).
+
+``tune`` and ``report`` take a score table by path or find it in the score cache from
+``--frameset`` and ``--matcher`` (the same ``--cfg`` / ``--weights`` as ``score``). Every
+command prints the sigma it used and where it came from.
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from pin_match import outputs
+from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides
+from pin_match.data.frameset import FrameSet
+from pin_match.errors import PinMatchError
+from pin_match.scoring.cache import cache_dir
+from pin_match.scoring.table import ScoreTable
+
+SCORE_CACHE = outputs.SCORES
+
+
+class UsageError(PinMatchError, ValueError):
+    """Arguments that argparse cannot check alone."""
+
+
+def _table(a: argparse.Namespace, fs: FrameSet) -> ScoreTable:
+    """The table named by path, else the one the score cache holds for --matcher on --frameset."""
+    from pin_match.scoring.cache import find_score_table
+
+    if len(a.scores) > 1:
+        raise UsageError(f"{len(a.scores)} score tables given ({', '.join(map(str, a.scores[:3]))}...): a shell glob "
+                         "matched several; name one, or use --matcher NAME with --frameset")
+    if bool(a.scores) == (a.matcher is not None):
+        raise UsageError("name the score table: its path, or --matcher NAME (found in --cache for --frameset)")
+    if a.scores:
+        return ScoreTable.read(a.scores[0])
+    return ScoreTable.read(find_score_table(a.cache, fs, a.matcher, matcher_overrides(a)))
+
+
+def _cmd_tune(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.tuning import default_threshold_path, tune, write_thresholds
+
+    fs = FrameSet.load(a.frameset)
+    table = _table(a, fs)
+    result = tune(table, fs, objective=a.objective, split=a.split)
+    path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
+    print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
+          f"{result['objective_value']:.4g}) -> {path}")
+
+
+def _cmd_report(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.report import report
+
+    fs = FrameSet.load(a.frameset)
+    table = _table(a, fs)
+    out = a.out or cache_dir(outputs.REPORTS, table.matcher_id, fs.fingerprint) / str(a.split)
+    result = report(table, fs, out, sigma=a.threshold, thresholds=a.thresholds, split=a.split, n_boot=a.bootstrap)
+    m = result["metrics"]
+    print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "
+          f"%Match {_fmt(m.get('match_pct'))}  TM {_fmt(m.get('tm_pct'))}  CM {_fmt(m.get('cm_pct'))}  "
+          f"NM {_fmt(m.get('nm_pct'))} -> {out}")
+
+
+def _fmt(value: float | None) -> str:
+    return "n/a" if value is None else f"{value:.2f}"
+
+
+def _cmd_similarity(a: argparse.Namespace) -> None:
+    from pin_match.contract.registry import create_matcher
+    from pin_match.evaluation.similarity import similarity, write_similarity
+
+    fs = FrameSet.load(a.frameset)
+    matcher = create_matcher(a.matcher, **matcher_overrides(a))
+    table, matrix = similarity(fs, matcher, split=a.split)
+    out = a.out or outputs.SIMILARITY / matcher.id
+    write_similarity(table, matrix, out, title=f"{matcher.id}, {a.split} frontal references")
+    print(table.to_string(float_format=lambda v: f"{v:.3f}"))
+    print(f"-> {out}")
+
+
+def _cmd_bench(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.bench import bench
+    from pin_match.evaluation.tables import markdown_table
+
+    joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
+                     batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
+    print(markdown_table(joint))
+    print(f"-> {a.out}")
+
+
+def _cmd_demo(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.bench import OFFLINE_MATCHERS, demo
+    from pin_match.evaluation.tables import markdown_table
+
+    joint, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, seed=a.seed, workers=a.workers, progress=not a.quiet)
+    print("\nPIN detection metrics on the synthetic val split (column 'sigma from': where each sigma came from):\n")
+    print(markdown_table(joint))
+    print(f"\nreports, plots, thresholds and score tables: {out}")
+
+
+def _table_arguments(s: argparse.ArgumentParser) -> None:
+    s.add_argument("scores", type=Path, nargs="*",
+                   help="score table (parquet, or its cache folder) printed by `pin-match score`; or use --matcher")
+    s.add_argument("--frameset", type=Path, required=True, help="the frame-set the scores were computed on")
+    s.add_argument("--matcher", help="find the table of this matcher for --frameset in --cache instead of a path")
+    add_matcher_config(s, "with --matcher: as given to `pin-match score`,")
+    s.add_argument("--cache", type=Path, default=SCORE_CACHE,
+                   help=f"with --matcher: the score cache (the --out of `pin-match score`; default {SCORE_CACHE})")
+
+
+def add_commands(sub: argparse._SubParsersAction) -> None:
+    from pin_match.evaluation.bench import DEMO_OUT
+    from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
+
+    objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
+    s = sub.add_parser("tune", help="choose sigma on one split (train by default); writes thresholds/<matcher>.json",
+                       description="Choose a matcher's sigma on one split of the frame-set it was scored on.")
+    _table_arguments(s)
+    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    s.add_argument("--split", default="train",
+                   help="split to tune on (default train; tuning on the split you report is optimistic)")
+    s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
+    s.set_defaults(func=_cmd_tune)
+
+    s = sub.add_parser("report", help="metrics, tables and plots of a score table at one sigma",
+                       description="Metrics, tables and plots of one split at one sigma. Sigma: --threshold, else "
+                                   "--thresholds, else the matcher's default; every output says which.")
+    _table_arguments(s)
+    g = s.add_mutually_exclusive_group()
+    g.add_argument("--threshold", type=float, metavar="SIGMA", help="report at this sigma")
+    g.add_argument("--thresholds", metavar="FILE|paper",
+                   help="a thresholds file written by `pin-match tune`, or 'paper' for the paper's sigmas")
+    s.add_argument("--split", default="val", help="split to report (default val; 'all' for every frame)")
+    s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
+    s.add_argument("--out", type=Path,
+                   help=f"report folder (default {outputs.REPORTS}/<matcher@hash>/<fingerprint>/<split>)")
+    s.set_defaults(func=_cmd_report)
+
+    s = sub.add_parser("similarity", help="intra/inter-category similarity of frontal references")
+    s.add_argument("frameset", type=Path, help="frame-set whose objects are compared")
+    s.add_argument("--matcher", required=True, help="registered matcher whose embedding is used")
+    add_matcher_config(s)
+    s.add_argument("--split", default="val", help="objects of this split (default val; 'all' for every object)")
+    s.add_argument("--out", type=Path, help=f"output folder (default {outputs.SIMILARITY}/<matcher@hash>)")
+    s.set_defaults(func=_cmd_similarity)
+
+    s = sub.add_parser("bench", help="score, choose sigma (tuned on train) and report val for several matchers")
+    s.add_argument("frameset", type=Path, help="frame-set to score (needs a val split)")
+    s.add_argument("--matcher", action="append", required=True, help="matcher to include (repeatable)")
+    s.add_argument("--out", type=Path, default=outputs.BENCH,
+                   help=f"folder of scores, thresholds, reports, table.md/.tex/.csv (default {outputs.BENCH})")
+    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    s.add_argument("--sigma-from", default="train", metavar="SPLIT|default|paper",
+                   help="tune sigma on this split (default train), or use each matcher's 'default' or the 'paper' "
+                        "sigma; the tables say which")
+    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
+    _run_arguments(s)
+    s.set_defaults(func=_cmd_bench)
+
+    s = sub.add_parser("demo", help="the whole job on the synthetic default frame-set (generated if absent)")
+    s.add_argument("--matcher", action="append",
+                   help="matcher to include (repeatable; default sift, color, effnet, xfeat)")
+    s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
+    s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")
+    _run_arguments(s)
+    s.set_defaults(func=_cmd_demo)
+
+
+def _run_arguments(s: argparse.ArgumentParser) -> None:
+    add_run_options(s, "worker processes/threads (default: up to 2 for scoring, all cores for rendering)")

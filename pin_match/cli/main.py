@@ -1,0 +1,181 @@
+"""pin-match: score, tune and report PIN matchers on frame-sets, offline.
+
+A thin command line over the same functions notebooks call. Every failure a user can
+cause (bad frame-set, unknown matcher or key, unwritable output) is a ``PinMatchError``
+and ends in one line on stderr naming the culprit, exit code 2. Any other exception is a
+bug and keeps its traceback.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+from pin_match import outputs
+from pin_match.cli import evaluation, training
+from pin_match.cli.args import add_matcher_config, matcher_overrides
+from pin_match.errors import PinMatchError
+
+IMPORT_HELP = """Build a frame-set from a PIN recording and the PInNED objects folder.
+
+  RECORDING/episodes.json[.gz]                {"episodes": [{episode_id, goals: [{object_id, object_category}],
+                                                distractors: [{object_id, object_category}, ...],
+                                                scene_id (optional), split (optional: train | val)}]}
+  RECORDING/<episode_id>/rgb/<step>.png|.jpg  RGB frames named by their integer step
+  RECORDING/<episode_id>/semantic/<step>.npy  PIN labels: 100000 target, 100001 same-category, 100002 other
+  RECORDING/<episode_id>/depth/<step>.npy     depth in metres (optional)
+  OBJECTS/objects_images/<id>/<id>_0.png      frontal view (RGBA), <id>_1.png back, <id>_2.png top,
+                                              for the goal and every distractor of every episode
+  OBJECTS/objects_descriptions.json           {<id>: [3 descriptions]} for the same objects
+
+An episode without a split key gets --split; each object takes the split of the episodes
+that use it (an object used by train and val episodes is an error).
+"""
+
+
+def _cmd_synth(a: argparse.Namespace) -> None:
+    from pin_match.data.synth import generate
+
+    kwargs = {k: v for k, v in dict(seed=a.seed, episodes=a.episodes, objects_per_category=a.objects_per_category,
+                                    frames_per_episode=a.frames_per_episode, workers=a.workers).items()
+              if v is not None}
+    fs = generate(a.out, overwrite=a.overwrite, **kwargs)
+    print(f"wrote {fs}")
+
+
+def _cmd_realset(a: argparse.Namespace) -> None:
+    from pin_match.data.realset import build
+
+    fs = build(a.out, seed=a.seed, overwrite=a.overwrite)
+    print(f"wrote {fs}")
+
+
+def _cmd_import(a: argparse.Namespace) -> None:
+    from pin_match.data.importer import import_recording
+
+    fs = import_recording(a.recording, a.objects, a.out, split=a.split, image_format=a.image_format,
+                          overwrite=a.overwrite)
+    print(f"wrote {fs}")
+
+
+def _cmd_score(a: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from pin_match.scoring import read_meta, score_to_file
+
+    kwargs = dict(overrides=matcher_overrides(a), split=a.split, out=a.out,
+                  batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
+    if a.scheduler:
+        from pin_match.scoring.cluster import connect
+
+        with connect(a.scheduler, workers=a.workers, timeout=a.scheduler_timeout) as client:
+            path = score_to_file(a.frameset, a.matcher, client=client, **kwargs)
+    else:
+        path = score_to_file(a.frameset, a.matcher, **kwargs)
+    s = pd.read_parquet(path, columns=["score"]).score
+    summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
+    print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
+
+
+def _cmd_merge(a: argparse.Namespace) -> None:
+    from pin_match.scoring.cache import merge
+
+    table = merge(a.parts, a.out)
+    print(f"merged {len(a.parts)} parts, {len(table.frames)} frames -> {a.out}")
+
+
+def _cmd_list(a: argparse.Namespace) -> None:
+    from pin_match.cli.catalog import matcher_catalog
+
+    cat = matcher_catalog(a.pattern)
+    print(cat.to_string(index=False) if len(cat) else f"no matcher matches {a.pattern!r}")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set (docs/synthetic.md)")
+    s.add_argument("out", type=Path, help="frame-set folder to create")
+    s.add_argument("--seed", type=int, help="generator seed (default 0); same seed and sizes, same bytes")
+    s.add_argument("--episodes", type=int, help="episodes, half train and half val (default 24)")
+    s.add_argument("--objects-per-category", type=int, help="object instances per category (default 10)")
+    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode (default 32)")
+    s.add_argument("--workers", type=int, help="rendering processes (default: all cores); output is the same")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
+    s.set_defaults(func=_cmd_synth)
+
+    s = sub.add_parser("import", help="build a frame-set from a PIN recording folder (layout: docs/frameset.md)",
+                       description=IMPORT_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
+    s.add_argument("recording", type=Path, help="recording folder: episodes.json[.gz] and one folder per episode")
+    s.add_argument("--objects", type=Path, required=True,
+                   help="PInNED objects folder: objects_images/<id>/<id>_0|1|2.png and objects_descriptions.json, "
+                        "for the goal AND every distractor")
+    s.add_argument("--out", type=Path, required=True, help="frame-set folder to create")
+    s.add_argument("--split", default="val",
+                   help="split of episodes without a 'split' key (default val); objects take their episodes' split")
+    s.add_argument("--image-format", choices=("source", "png", "jpeg"), default="source",
+                   help="how frames are stored: 'source' keeps each file's bytes (lossless, default), 'png' "
+                        "re-encodes losslessly, 'jpeg' re-encodes at quality 95 (smaller, lossy)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at --out")
+    s.set_defaults(func=_cmd_import)
+
+    s = sub.add_parser("realset", help="build the small real-photo test frame-set (needs scikit-image; offline)",
+                       description="Cut objects out of the real photos bundled in scikit-image's wheel and paste "
+                                   "them at other scales, rotations and backgrounds: 6 targets, each with a "
+                                   "same-category look-alike, 12 frames per target, exact instance masks. "
+                                   "Needs scikit-image (pip install 'pin-match[test]'). Layout: docs/frameset.md.")
+    s.add_argument("out", type=Path, help="frame-set folder to create")
+    s.add_argument("--seed", type=int, default=0, help="placement seed (default 0); the same seed gives the same bytes")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
+    s.set_defaults(func=_cmd_realset)
+
+    s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
+    s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")
+    s.add_argument("--matcher", required=True, help="registered matcher name (`pin-match list`)")
+    add_matcher_config(s)
+    s.add_argument("--split", help="score only this split (default: every frame)")
+    s.add_argument("--out", type=Path, default=outputs.SCORES,
+                   help="score cache; the table goes to <out>/<matcher@hash>/<fingerprint>/ and its path is printed")
+    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
+    s.add_argument("--shard", help="i/n: score a deterministic part (join the parts with `pin-match merge`)")
+    s.add_argument("--workers", type=int, help="threads decoding and scoring frames (default up to 2); "
+                                                    "with --scheduler local, worker processes")
+    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    s.add_argument("--scheduler", metavar="local|ADDRESS",
+                   help="score on Dask distributed: 'local' starts --workers worker processes here; else a "
+                        "scheduler address (tcp://host:8786) or scheduler JSON file; same cache and table")
+    s.add_argument("--scheduler-timeout", type=float, default=30.0, metavar="SECONDS",
+                   help="give up on an unreachable --scheduler after this long (default 30)")
+    s.set_defaults(func=_cmd_score)
+
+    s = sub.add_parser("merge", help="join shard score tables")
+    s.add_argument("parts", nargs="+", type=Path, help="shard tables of one matcher and frame-set")
+    s.add_argument("--out", type=Path, required=True, help="merged table to write (parquet)")
+    s.set_defaults(func=_cmd_merge)
+
+    s = sub.add_parser("list", help="registered matchers, their modality, default sigma and weights")
+    s.add_argument("pattern", nargs="?", default="*", help="shell-style name pattern (default: all)")
+    s.set_defaults(func=_cmd_list)
+
+    evaluation.add_commands(sub)
+    training.add_commands(sub)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    try:
+        args.func(args)
+    except PinMatchError as exc:
+        print(f"pin-match {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        print(f"pin-match {args.command}: interrupted; rerun the same command to resume", file=sys.stderr)
+        return 130
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

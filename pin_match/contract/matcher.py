@@ -1,0 +1,357 @@
+"""The matcher contract: the target, the result, the base classes, the config.
+
+It imports numpy and the rest of ``pin_match.contract`` (crops, weights) only; nothing of
+frame-sets, scoring or metrics. A plug-in imports everything it needs from
+``pin_match.contract``.
+
+The one interface every matcher shares: prepare once per target, then score images.
+
+A matcher returns a score (higher = more likely the target) and the image points where
+it believes the target is, each with its own score, and never applies a threshold: the
+caller picks sigma, so one scoring pass serves every threshold, curve and tuning run.
+The base class checks every result, so a broken plug-in fails loudly and by name.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+import math
+from abc import ABC, abstractmethod
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from enum import Enum
+from typing import Any, ClassVar
+
+import numpy as np
+
+from pin_match.contract.crops import POLICIES, Crop, crop_boxes
+from pin_match.contract.weights import WeightsSpec
+from pin_match.errors import PinMatchError
+
+
+class Modality(str, Enum):
+    VISUAL = "visual"      # reference views only
+    TEXTUAL = "textual"    # descriptions only
+    CATEGORY = "category"  # may read the category label (an ablation in the paper)
+
+
+N_VIEWS = 3         # reference views per target: 0 frontal (30 deg yaw), 1 back, 2 top
+N_DESCRIPTIONS = 3  # human-written descriptions per target
+
+
+class TargetError(PinMatchError, ValueError):
+    """A target that is not what every matcher may assume (3 RGBA views with a mask, 3 descriptions)."""
+
+
+@dataclass(frozen=True)
+class Target:
+    """What a matcher is told about the object to find."""
+
+    object_id: str
+    category: str
+    views: tuple[np.ndarray, ...]  # RGBA uint8, view 0 frontal (30 deg yaw), 1 back, 2 top
+    descriptions: tuple[str, ...]
+    view_paths: tuple[str, ...] = field(default=(), compare=False)
+
+    def __post_init__(self) -> None:
+        if len(self.views) != N_VIEWS:
+            raise TargetError(f"target {self.object_id}: expected {N_VIEWS} views, got {len(self.views)}")
+        for i, view in enumerate(self.views):
+            where = self.view_paths[i] if i < len(self.view_paths) else f"view {i}"
+            if view.ndim != 3 or view.shape[2] != 4 or view.dtype != np.uint8:
+                raise TargetError(
+                    f"target {self.object_id}: {where} must be RGBA uint8, got shape {view.shape} {view.dtype}"
+                )
+            if not view[..., 3].any():
+                raise TargetError(f"target {self.object_id}: {where} has an empty alpha mask")
+        if len(self.descriptions) != N_DESCRIPTIONS:
+            raise TargetError(
+                f"target {self.object_id}: expected {N_DESCRIPTIONS} descriptions, got {len(self.descriptions)}"
+            )
+
+
+class MatcherError(PinMatchError, RuntimeError):
+    """A matcher was misused or produced an invalid result."""
+
+
+class ConfigError(PinMatchError, ValueError):
+    """An unknown or ill-typed configuration key."""
+
+
+def crops_field(default: str = "pin") -> Any:
+    """The ``crops`` config field, for matchers that see frames through a crop policy."""
+    return field(default=default, metadata={"help": f"crop policy, one of {', '.join(POLICIES)}"})
+
+
+def weights_field() -> Any:
+    """The ``weights`` config field, for matchers that load a checkpoint."""
+    return field(default=None, metadata={"help": "local file or folder overriding the default weights"})
+
+
+@dataclass
+class MatcherConfig:
+    """Settings shared by every matcher; subclasses add their own fields.
+
+    Only ``device`` is common: a matcher declares ``crops: str = crops_field()`` and
+    ``weights: str | None = weights_field()`` itself when it uses them, so a key that
+    does nothing is refused instead of being hashed into a new id. Fields whose metadata
+    says ``hash=False`` do not change results and stay out of the config hash.
+    """
+
+    device: str = field(default="cpu", metadata={"hash": False, "help": "torch device, e.g. cpu or cuda:0"})
+
+    def __post_init__(self) -> None:
+        crops = getattr(self, "crops", None)
+        if crops is not None and crops not in POLICIES:
+            raise ConfigError(f"crops={crops!r}: choose one of {POLICIES}")
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    def hashed_dict(self) -> dict[str, Any]:
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self) if f.metadata.get("hash", True)}
+
+
+@dataclass
+class CropConfig(MatcherConfig):
+    """The config of a ``CropMatcher``: it sees frames through a crop policy."""
+
+    crops: str = crops_field()
+
+
+def _point_array(a: Any) -> np.ndarray:
+    return np.asarray(a, dtype=np.float32).reshape(-1, 2) if a is not None else np.zeros((0, 2), np.float32)
+
+
+@dataclass
+class MatchResult:
+    """One image's verdict; ``points_at(sigma)`` recovers the coordinates for any threshold."""
+
+    score: float
+    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))  # (K, 2) x, y
+    point_scores: np.ndarray | None = None   # (K,); None = every point carries the frame score
+    crop_scores: np.ndarray | None = None    # one score per crop of the crop policy
+    heatmap: np.ndarray | None = None        # low-resolution score map (per crop: n_crops x h x w)
+    boxes: np.ndarray | None = None          # (M, 4) x0, y0, x1, y1 in image pixels
+    box_scores: np.ndarray | None = None     # (M,)
+
+    def __post_init__(self) -> None:
+        self.points = _point_array(self.points)
+        if self.point_scores is not None:
+            self.point_scores = np.asarray(self.point_scores, dtype=np.float32).reshape(-1)
+
+    def scores_of_points(self) -> np.ndarray:
+        if self.point_scores is None:
+            return np.full(len(self.points), self.score, np.float32)
+        return self.point_scores
+
+    def points_at(self, sigma: float) -> np.ndarray:
+        """The target's coordinates under threshold sigma (empty when the frame is not matched)."""
+        return points_above(self.score, self.points, self.scores_of_points(), sigma)
+
+
+def points_above(score: float, points: np.ndarray, point_scores: np.ndarray, sigma: float) -> np.ndarray:
+    """The caller's threshold rule: no points unless the frame is matched, then the points scoring >= sigma."""
+    if score < sigma:
+        return np.zeros((0, 2), np.float32)
+    return points[point_scores >= sigma]
+
+
+class Matcher(ABC):
+    """Base class: subclasses implement ``_prepare`` and ``_match_batch``.
+
+    Class attributes describe the method for the registry, ``pin-match list`` and the docs.
+    Bump ``version`` whenever the algorithm changes results, so stale caches are not reused.
+    """
+
+    name: ClassVar[str] = ""
+    Config: ClassVar[type[MatcherConfig]] = MatcherConfig
+    modality: ClassVar[Modality] = Modality.VISUAL
+    default_sigma: ClassVar[float] = 0.5
+    weights_spec: ClassVar[WeightsSpec | None] = None  # None: weight-free (or a composite of matchers that have one)
+    paper: ClassVar[str] = ""
+    version: ClassVar[int] = 1
+    # True when match_batch is thread-safe after prepare: scoring then spreads frames over threads
+    parallel_frames: ClassVar[bool] = False
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        self.cfg = cfg if cfg is not None else self.Config()
+        if not isinstance(self.cfg, self.Config):
+            raise ConfigError(f"{self.display_name}: config must be {self.Config.__name__}, got "
+                              f"{type(self.cfg).__name__}")
+        self._target: Target | None = None
+
+    # ------------------------------------------------------------------ identity
+    @property
+    def display_name(self) -> str:
+        return self.name or type(self).__name__
+
+    @property
+    def config_hash(self) -> str:
+        """Hash of name, version, config and the weights' identity (content for local files), never of a path."""
+        config = self.cfg.hashed_dict()
+        weights = config.pop("weights", None)
+        payload = dict(matcher=self.display_name, version=self.version, config=config)
+        if self.weights_spec is not None:
+            payload["weights"] = self.weights_spec.identity(weights)
+        if self.parts():  # a new version of a part never reuses the composite's caches
+            payload["parts"] = {role: part.id for role, part in self.parts().items()}
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+    @property
+    def id(self) -> str:
+        """Registry name plus config hash, e.g. ``dinov2@3f9a1c2b7d10``."""
+        return f"{self.display_name}@{self.config_hash}"
+
+    # ------------------------------------------------------------------ public API
+    def prepare(self, target: Target) -> None:
+        """Build everything derived from the target once (prototypes, text features, keypoints)."""
+        if self.modality is not Modality.CATEGORY:
+            target = dataclasses.replace(target, category="")  # the label is off limits
+        self._prepare(target)
+        self._target = target
+
+    def match(self, image: np.ndarray) -> MatchResult:
+        return self.match_batch([image])[0]
+
+    def match_batch(self, images: Sequence[np.ndarray]) -> list[MatchResult]:
+        if self._target is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) before match()")
+        images = [self._check_image(im, i) for i, im in enumerate(images)]
+        results = self._match_batch(images)
+        if len(results) != len(images):
+            raise MatcherError(f"matcher {self.display_name} returned {len(results)} results for "
+                               f"{len(images)} images")
+        for image, result in zip(images, results):
+            self._validate(result, image.shape[0], image.shape[1])
+        return results
+
+    def parts(self) -> dict[str, Matcher]:
+        """The matchers a composite is built from, by role (their weights are listed by ``pin-match list``)."""
+        return {}
+
+    def embed_reference(self, view: np.ndarray) -> np.ndarray:
+        """A global embedding of one RGBA reference (the paper's similarity analysis)."""
+        raise MatcherError(f"matcher {self.display_name} has no global embedding for the similarity analysis")
+
+    # ------------------------------------------------------------------ to implement
+    @abstractmethod
+    def _prepare(self, target: Target) -> None: ...
+
+    @abstractmethod
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]: ...
+
+    # ------------------------------------------------------------------ checks
+    def _check_image(self, image: np.ndarray, index: int) -> np.ndarray:
+        image = np.asarray(image)
+        if image.ndim == 2:  # grayscale frames are accepted and expanded
+            image = np.repeat(image[:, :, None], 3, axis=2)
+        if image.ndim != 3 or image.shape[2] not in (3, 4) or image.dtype != np.uint8:
+            raise MatcherError(f"matcher {self.display_name}: image {index} must be H x W x 3 uint8, got "
+                               f"{image.shape} {image.dtype}")
+        if image.shape[0] < 8 or image.shape[1] < 8:
+            raise MatcherError(f"matcher {self.display_name}: image {index} is too small ({image.shape[:2]})")
+        return np.ascontiguousarray(image[:, :, :3])
+
+    def _validate(self, r: MatchResult, height: int, width: int) -> None:
+        who = f"matcher {self.display_name}"
+        if not isinstance(r, MatchResult):
+            raise MatcherError(f"{who} returned {type(r).__name__}, expected MatchResult")
+        if not isinstance(r.score, (float, int, np.floating, np.integer)) or not math.isfinite(float(r.score)):
+            raise MatcherError(f"{who} returned a non-finite score {r.score!r}")
+        r.score = float(r.score)
+        problem = _points_problem(r, height, width) or _extras_problem(r)
+        if problem:
+            raise MatcherError(f"{who} {problem}")
+        if r.boxes is not None:
+            r.boxes = np.asarray(r.boxes, np.float32).reshape(-1, 4)
+
+
+def _points_problem(r: MatchResult, height: int, width: int) -> str | None:
+    if not np.isfinite(r.points).all():
+        return "returned non-finite points"
+    x, y = r.points[:, 0], r.points[:, 1]
+    if len(r.points) and ((x < 0).any() or (y < 0).any() or (x >= width).any() or (y >= height).any()):
+        return f"returned points outside the {width}x{height} image"
+    if r.point_scores is not None and r.point_scores.shape != (len(r.points),):
+        return f"returned {len(r.point_scores)} point scores for {len(r.points)} points"
+    if r.point_scores is not None and not np.isfinite(r.point_scores).all():
+        return "returned non-finite point scores"
+    return None
+
+
+def _extras_problem(r: MatchResult) -> str | None:
+    if r.crop_scores is not None and not np.isfinite(r.crop_scores).all():
+        return "returned non-finite crop scores"
+    if r.boxes is not None and (r.box_scores is None or len(r.box_scores) != len(np.asarray(r.boxes).reshape(-1, 4))):
+        return "returned boxes without one box score each"
+    return None
+
+
+# class attributes earlier contracts read and this one ignores, with where the information lives now
+RETIRED_ATTRIBUTES = {"license": "weights_spec = WeightsSpec(..., license=...)", "hub_id": "weights_spec"}
+
+
+def class_problems(cls: type[Matcher]) -> list[str]:
+    """What keeps a matcher class from working under this contract, each with its fix (empty when none).
+
+    A contract base class may need config fields (``CropMatcher`` reads ``crops``): a ``Config``
+    that does not derive from its ``Config`` would fail deep inside matching, so it is named here.
+    """
+    problems = []
+    for base in cls.__mro__[1:]:
+        if base.__module__ == __name__ and issubclass(base, Matcher) and not issubclass(cls.Config, base.Config):
+            problems.append(f"its Config {cls.Config.__name__} must derive from {base.Config.__name__}, which "
+                            f"{base.__name__} needs: write `class {cls.Config.__name__}({base.Config.__name__})`")
+            break
+    for attr, home in RETIRED_ATTRIBUTES.items():
+        if any(attr in vars(k) for k in cls.__mro__ if k not in (Matcher, object)):
+            problems.append(f"the class attribute `{attr}` is no longer read: declare it as {home}")
+    return problems
+
+
+class CropMatcher(Matcher):
+    """A matcher that sees the frame through the configured crop policy.
+
+    Subclasses implement ``_match_crops``, which receives every crop of the whole batch
+    at once (so a backbone runs one batch) and returns results in crop pixel coordinates;
+    this class maps points back to the frame and takes the max over crops.
+    """
+
+    Config: ClassVar[type[MatcherConfig]] = CropConfig
+
+    @abstractmethod
+    def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]: ...
+
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        plans = [crop_boxes(im.shape[0], im.shape[1], self.cfg.crops) for im in images]
+        flat = [np.ascontiguousarray(c.take(im)) for im, boxes in zip(images, plans) for c in boxes]
+        crop_results = self._match_crops(flat)
+        if len(crop_results) != len(flat):
+            raise MatcherError(f"matcher {self.display_name} returned {len(crop_results)} results for "
+                               f"{len(flat)} crops")
+        out, k = [], 0
+        for boxes in plans:
+            parts = crop_results[k:k + len(boxes)]
+            k += len(boxes)
+            out.append(merge_crop_results(parts, boxes))
+        return out
+
+
+def merge_crop_results(parts: Sequence[MatchResult], boxes: Sequence[Crop]) -> MatchResult:
+    """Frame score = max over crops; points of all crops, mapped into frame pixels."""
+    scores = np.array([float(p.score) for p in parts], np.float32)
+    points = np.concatenate([b.to_frame(p.points) for p, b in zip(parts, boxes)]) if parts else np.zeros((0, 2))
+    point_scores = np.concatenate([p.scores_of_points() for p in parts]).astype(np.float32)
+    heatmaps = [p.heatmap for p in parts]
+    heatmap = np.stack(heatmaps) if all(h is not None for h in heatmaps) and \
+        len({h.shape for h in heatmaps}) == 1 else None
+    boxes_out, box_scores = None, None
+    if any(p.boxes is not None for p in parts):
+        boxes_out = np.concatenate([p.boxes.reshape(-1, 4) + np.array([b.x0, b.y0, b.x0, b.y0], np.float32)
+                                    for p, b in zip(parts, boxes) if p.boxes is not None])
+        box_scores = np.concatenate([p.box_scores for p in parts if p.boxes is not None])
+    return MatchResult(score=float(scores.max()), points=points.astype(np.float32), point_scores=point_scores,
+                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores)

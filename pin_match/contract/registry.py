@@ -1,0 +1,166 @@
+"""Find matchers by name: built-ins, anything decorated in a loaded module, and entry points.
+
+Built-ins are listed here by module, so a name never fails because its module was not
+imported, and heavy libraries (torch, timm) load only when such a matcher is asked for.
+Third-party packages add matchers through the ``pin_match.matchers`` entry-point group.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import difflib
+import fnmatch
+import importlib
+import types
+import typing
+from collections.abc import Callable
+from importlib.metadata import entry_points
+from typing import Any
+
+from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, class_problems
+from pin_match.errors import PinMatchError
+
+ENTRY_POINT_GROUP = "pin_match.matchers"
+
+# name -> module that registers it on import
+BUILTINS: dict[str, str] = {
+    "sift": "matchers.classic",
+    "color": "matchers.classic",
+    "dino": "matchers.patch",
+    "dinov2": "matchers.patch",
+    "clip": "matchers.patch",
+    "clip-text": "matchers.patch",
+    "effnet": "matchers.effnet",
+    "superglue": "matchers.keypoint",
+    "lightglue": "matchers.keypoint",
+    "ieve": "matchers.keypoint",
+    "disk-lightglue": "matchers.glue",
+    "aliked-lightglue": "matchers.glue",
+    "xfeat": "matchers.glue",
+    "clip-grad": "matchers.clip_grad",
+    "owl": "matchers.owl",
+    "owl-image": "matchers.owl",
+    "persam": "matchers.persam",
+    "persam-f": "matchers.persam",
+    "learned": "matchers.learned",
+}
+
+_REGISTRY: dict[str, type[Matcher]] = {}
+
+
+class UnknownMatcherError(PinMatchError, KeyError):
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0])
+
+
+def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Matcher]], type[Matcher]]:
+    """Class decorator: ``@register_matcher("sift")`` makes the class reachable by name."""
+
+    def deco(cls: type[Matcher]) -> type[Matcher]:
+        if not (isinstance(cls, type) and issubclass(cls, Matcher)):
+            raise TypeError(f"@register_matcher({name!r}) must decorate a Matcher subclass")
+        problems = class_problems(cls)
+        if problems:
+            raise ConfigError(f"matcher {name!r} ({cls.__module__}.{cls.__qualname__}) does not fit the matcher "
+                              f"contract: {'; '.join(problems)}")
+        existing = _REGISTRY.get(name)
+        if existing is not None and existing is not cls and not overwrite and \
+                existing.__qualname__ != cls.__qualname__:
+            raise ConfigError(f"matcher name {name!r} is already registered by {existing.__module__}")
+        if "name" not in vars(cls):
+            # the first name a class is registered under is its own (ids and caches carry it);
+            # later names (an entry point's, an alias) only point at it and never rename it
+            cls.name = name
+        _REGISTRY[name] = cls
+        return cls
+
+    return deco
+
+
+def _entry_points() -> dict[str, Any]:
+    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+
+
+def available_names() -> list[str]:
+    return sorted(set(BUILTINS) | set(_REGISTRY) | set(_entry_points()))
+
+
+def list_matchers(pattern: str = "*") -> list[str]:
+    """Registered names matching a shell-style pattern, e.g. ``list_matchers("clip*")``."""
+    return [n for n in available_names() if fnmatch.fnmatchcase(n, pattern)]
+
+
+def get_matcher_class(name: str) -> type[Matcher]:
+    if name not in _REGISTRY:
+        if name in BUILTINS:
+            importlib.import_module(BUILTINS[name])
+        else:
+            ep = _entry_points().get(name)
+            if ep is not None:
+                cls = ep.load()
+                if name not in _REGISTRY:  # an entry point may name a class that is not decorated
+                    register_matcher(name)(cls)
+    if name not in _REGISTRY:
+        close = difflib.get_close_matches(name, available_names(), n=3, cutoff=0.5)
+        hint = f"; did you mean {', '.join(close)}?" if close else f"; known: {', '.join(available_names())}"
+        raise UnknownMatcherError(f"unknown matcher {name!r}{hint}")
+    return _REGISTRY[name]
+
+
+def build_config(cls: type[Matcher], overrides: dict[str, Any]) -> MatcherConfig:
+    """The matcher's defaults merged with the user's overrides (strings from the CLI are coerced)."""
+    fields = {f.name: f for f in dataclasses.fields(cls.Config)}
+    hints = typing.get_type_hints(cls.Config)
+    kwargs = {}
+    for key, value in overrides.items():
+        if key not in fields:
+            close = difflib.get_close_matches(key, list(fields), n=3, cutoff=0.5)
+            hint = f"; did you mean {', '.join(close)}?" if close else f"; valid keys: {', '.join(fields)}"
+            raise ConfigError(f"matcher {cls.name!r} has no config key {key!r}{hint}")
+        kwargs[key] = _coerce(key, value, hints[key]) if isinstance(value, str) else value
+    return cls.Config(**kwargs)
+
+
+def _coerce(key: str, text: str, hint: Any) -> Any:
+    options = typing.get_args(hint) if typing.get_origin(hint) in (typing.Union, types.UnionType) else (hint,)
+    if type(None) in options and text.lower() in ("none", "null", ""):
+        return None
+    for typ in options:
+        origin = typing.get_origin(typ)
+        try:
+            if origin in (tuple, list):
+                item = next((a for a in typing.get_args(typ) if a is not Ellipsis), str)
+                return origin(_coerce(key, x.strip(), item) for x in text.split(",") if x.strip())
+            if typ is bool:
+                return {"1": True, "true": True, "yes": True, "on": True,
+                        "0": False, "false": False, "no": False, "off": False}[text.lower()]
+            if typ in (int, float, str):
+                return typ(text)
+        except (ValueError, KeyError, ConfigError):
+            continue
+    raise ConfigError(f"config key {key!r}: cannot read {text!r} as {hint}")
+
+
+def parse_overrides(pairs: list[str] | None) -> dict[str, str]:
+    """``["k=v", ...]`` from ``--cfg`` into a dict."""
+    out = {}
+    for pair in pairs or []:
+        key, sep, value = pair.partition("=")
+        if not sep or not key:
+            raise ConfigError(f"--cfg {pair!r}: expected key=value")
+        out[key.strip()] = value.strip()
+    return out
+
+
+def with_weights(overrides: dict[str, Any] | None, weights: str | None) -> dict[str, Any]:
+    """Config overrides plus a local ``weights`` file or folder (``--weights``); it wins over a ``weights`` key."""
+    merged = dict(overrides or {})
+    if weights is not None:
+        merged["weights"] = weights
+    return merged
+
+
+def create_matcher(name: str, **overrides: Any) -> Matcher:
+    """Instantiate a matcher by name. Never touches the network: weights load lazily."""
+    cls = get_matcher_class(name)
+    return cls(build_config(cls, overrides))

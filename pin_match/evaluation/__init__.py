@@ -1,0 +1,17 @@
+"""Evaluation: score tables and frame-sets in, PIN metrics, tuned sigmas, reports and tables out; no model.
+
+``labels`` classifies frames from ground truth, ``metrics`` and ``sweep`` are pure
+functions of scored frames, ``sigma`` and ``tuning`` choose the threshold, ``evaluator``,
+``report``, ``tables`` and ``plots`` present it; ``bench`` runs the whole chain for several
+matchers (and the demo); ``similarity`` is the paper's intra/inter-category analysis.
+"""
+
+from pin_match.evaluation.evaluator import EvaluationError, check_frameset, evaluate
+from pin_match.evaluation.report import report
+from pin_match.evaluation.sigma import SigmaChoice, SigmaError, load_threshold, resolve_sigma
+from pin_match.evaluation.sweep import sweep
+from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES, TuningError, tune, write_thresholds
+
+__all__ = ["DEFAULT_OBJECTIVE", "OBJECTIVES", "EvaluationError", "SigmaChoice", "SigmaError", "TuningError",
+           "check_frameset", "evaluate", "load_threshold", "report", "resolve_sigma", "sweep", "tune",
+           "write_thresholds"]

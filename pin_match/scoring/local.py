@@ -1,0 +1,88 @@
+"""Score episodes in this process, taking turns with other processes on the same cache through lock files.
+
+Each episode's rows land in their own chunk file, written atomically, so a killed run
+resumes where it stopped and two processes can share one cache.
+"""
+
+from __future__ import annotations
+
+import errno
+import os
+import time
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+from pin_match import atomic
+from pin_match.contract.matcher import Matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.scoring.episode import score_episode
+
+LOCK_STALE_S = 600.0
+LOCK_EMPTY_S = 5.0  # a lock still without a pid after this long was left by a process killed while taking it
+
+
+def score_here(part: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path, batch_size: int,
+                workers: int, bar) -> None:
+    """Score the episodes without a chunk in this process, taking turns with other processes through lock files."""
+    held: dict[str, str] = {}
+    with ThreadPoolExecutor(max_workers=max(2, workers)) as pool:
+        pending = list(episode_ids)
+        while pending:
+            deferred = []
+            for episode_id in pending:
+                if (chunks / f"{episode_id}.parquet").exists():
+                    bar.update(int((part.frames.episode_id == episode_id).sum()))
+                    continue
+                lock = _try_lock(chunks / f"{episode_id}.lock")
+                if lock is None:  # another process is scoring it right now
+                    deferred.append(episode_id)
+                    continue
+                try:
+                    rows = score_episode(part, matcher, episode_id, batch_size=batch_size, pool=pool, workers=workers,
+                                          bar=bar, held=held)
+                    atomic.write_parquet(chunks / f"{episode_id}.parquet", rows)
+                finally:
+                    lock.unlink(missing_ok=True)
+            if deferred:
+                time.sleep(0.2)
+            pending = deferred
+
+
+def _try_lock(path: Path) -> Path | None:
+    """An exclusive per-episode lock file; a lock older than LOCK_STALE_S or of a dead pid is taken over."""
+    for _ in range(2):
+        try:
+            fd = os.open(path, os.O_CREAT | os.O_EXCL | os.O_WRONLY)
+        except FileExistsError:
+            if _lock_is_stale(path):
+                path.unlink(missing_ok=True)
+                continue
+            return None
+        except OSError as exc:
+            if exc.errno in (errno.EROFS, errno.EACCES, errno.ENOSPC):
+                raise atomic.OutputError(f"cannot write into {path.parent}: {exc.strerror}") from exc
+            raise
+        with os.fdopen(fd, "w") as fh:
+            fh.write(str(os.getpid()))
+        return path
+    return None
+
+
+def _lock_is_stale(path: Path) -> bool:
+    try:
+        text = path.read_text()
+        age = time.time() - path.stat().st_mtime
+        pid = int(text or "0")
+    except (OSError, ValueError):
+        return True
+    if age > LOCK_STALE_S:
+        return True
+    if pid <= 0:  # its writer is between creating it and writing the pid, or was killed there
+        return age > LOCK_EMPTY_S
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return True
+    except PermissionError:
+        return False
+    return False

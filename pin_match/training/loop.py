@@ -1,0 +1,164 @@
+"""``pin-match train``: learn a projection head on the train split that tells the user's instance from look-alikes.
+
+Data. Every object of a train episode that has references (the target and its
+same-category distractors) serves as a query: its prototypes are compared with every
+patch of every crop of that episode. For a query, a patch mostly covered by it is a
+positive, a patch on a same-category sibling a hard negative (PIN's failure mode), any
+other patch a negative. Part of the train objects of every category is held out: their
+pixels never enter the loss, and the held-out queries give the validation AUROC (early
+stopping) and the sigma, both on objects the head never learned from.
+
+Loss (both terms on ``scale x (cosine - bias)`` with a learned scale and bias):
+- a class-balanced BCE on patches: the mean over positives, over hard negatives and over
+  the other negatives weigh the same, so the few sibling patches are not drowned by the
+  background;
+- a BCE on the crop's max-cosine against "the query is visible in the crop", balanced the
+  same way over crops showing the query, crops showing only a sibling, and the rest: the
+  matcher decides on the max over patches, so this term trains exactly the number that is
+  thresholded, with the look-alike crops as a class of their own.
+
+Determinism: features come from the store, the head's init from ``seed``, each epoch's
+batch order from (seed, epoch); deterministic torch algorithms and a fixed thread count
+make a run, and a run resumed after a kill, identical to the bit on the CPU.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import datetime as dt
+import json
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from matchers.patch import patch_matcher
+from pin_match import atomic
+from pin_match.data.frameset import FrameSet
+from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
+from pin_match.scoring.cache import cache_dir
+from pin_match.training.checkpoint import load_state, params, save_state, write_head
+from pin_match.training.compare import choose_sigma_on, query_frames, validation_auroc
+from pin_match.training.config import TrainConfig, TrainingError, default_backbone
+from pin_match.training.data import TrainData, check_trainable, epoch_batches, prepare_data
+from pin_match.training.features import DEFAULT_OUT, FeatureStore, build_features
+from pin_match.training.loss import batch_loss
+
+
+@contextmanager
+def deterministic(threads: int):
+    """Deterministic torch algorithms and a fixed thread count for the block; the caller's settings come back."""
+    old_threads, old_det = torch.get_num_threads(), torch.are_deterministic_algorithms_enabled()
+    torch.set_num_threads(threads)
+    torch.use_deterministic_algorithms(True)
+    try:
+        yield
+    finally:
+        torch.use_deterministic_algorithms(old_det)
+        torch.set_num_threads(old_threads)
+
+
+def find_store(fs: FrameSet, backbone: str, overrides: dict, features: str | Path, progress: bool) -> FeatureStore:
+    """The store of this backbone config and frame-set (all splits, else the train split), built when absent."""
+    matcher = patch_matcher(backbone, **overrides)
+    base = cache_dir(features, matcher.id, fs.fingerprint)
+    for split in ("all", "train"):
+        if (base / split / "store.json").exists():
+            return FeatureStore.open(base / split, fs)
+    return build_features(fs, backbone, overrides=overrides, out=features, progress=progress)
+
+
+def train(frameset: FrameSet | str | Path, out: str | Path, *, backbone: str | None = None,
+          overrides: dict[str, Any] | None = None, features: str | Path = DEFAULT_OUT,
+          cfg: TrainConfig | None = None, store: FeatureStore | None = None, progress: bool = True,
+          stop_after: int | None = None) -> dict:
+    """Train (or resume, or find finished) a head in ``out``; returns its config.json content.
+
+    After every epoch the folder is a usable head (best epoch so far) and holds the state
+    a killed run resumes from. ``stop_after`` ends this call once that many epochs are
+    done in total, as a kill would (the next call resumes); tests and budgeted runs use it.
+    """
+    from tqdm.auto import tqdm
+
+    cfg = cfg or TrainConfig()
+    fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
+    check_trainable(fs)  # before any backbone is built
+    backbone = backbone or default_backbone()
+    overrides = dict(overrides or {})
+    store = store or find_store(fs, backbone, overrides, features, progress)
+    if store.meta["frameset_fingerprint"] != fs.fingerprint:
+        raise TrainingError(f"feature store {store.root} was built for frame-set {store.meta['frameset_root']} "
+                            f"({store.meta['frameset_fingerprint']}), not for {fs.root} ({fs.fingerprint})")
+    data = prepare_data(fs, store, cfg)
+    store.meta["categories"] = [str(c) for c in fs.objects.set_index("object_id").category.reindex(store.objects)]
+    out = Path(out)
+    run = json.loads(json.dumps(dict(train=dataclasses.asdict(cfg), backbone=backbone, backbone_cfg=overrides,
+                                     backbone_id=store.backbone_id, frameset_fingerprint=fs.fingerprint,
+                                     dim=store.dim)))
+    if (out / CONFIG_FILE).exists() and (out / STATE_FILE).exists():
+        done = read_head_config(out)
+        if done.get("finished") and done.get("run") == run:
+            return done
+    atomic.ensure_dir(out)
+
+    with deterministic(cfg.threads), torch.random.fork_rng(devices=[]):
+        torch.manual_seed(cfg.seed)
+        head = ProjectionHead(store.dim, cfg.hidden)
+        scale = torch.nn.Parameter(torch.tensor(10.0))
+        bias = torch.nn.Parameter(torch.tensor(0.5))
+        opt = torch.optim.AdamW(params(head, scale, bias), lr=cfg.lr, weight_decay=cfg.weight_decay)
+        resumed = load_state(out, run, head, scale, bias, opt)
+        if resumed is None:
+            held = query_frames(data, None, data.holdout_objects, relevant_only=True)  # epoch 0: the frozen matcher
+            state = dict(epoch=0, best_epoch=0, sigma=None,
+                         history=[dict(epoch=0, loss=None, val_auroc=validation_auroc(held), seconds=0.0)])
+            best = {k: v.detach().clone() for k, v in head.state_dict().items()}
+        else:
+            state, best = resumed
+        bar = tqdm(total=cfg.epochs, initial=state["epoch"], desc=f"train {out.name}", unit="epoch",
+                   disable=not progress)
+        bar.set_postfix(val_auroc=f"{state['history'][-1]['val_auroc']:.3f}")
+        interrupted = False
+        while state["epoch"] < cfg.epochs and state["epoch"] - state["best_epoch"] < cfg.patience:
+            if stop_after is not None and state["epoch"] >= stop_after:
+                interrupted = True
+                break
+            epoch = state["epoch"] + 1
+            state["history"].append(_run_epoch(head, scale, bias, opt, data, cfg, epoch))
+            state["epoch"] = epoch
+            val = state["history"][-1]["val_auroc"]
+            if val > state["history"][state["best_epoch"]]["val_auroc"]:
+                state["best_epoch"] = epoch
+                best = {k: v.detach().clone() for k, v in head.state_dict().items()}
+            save_state(out, run, head, best, scale, bias, opt, state)
+            write_head(out, best, store, run, fs, data, cfg, state, finished=False)
+            bar.update(1)
+            bar.set_postfix(loss=f"{state['history'][-1]['loss']:.4f}", val_auroc=f"{val:.3f}")
+        bar.close()
+        if not interrupted:  # sigma once, on every frame of the held-out objects' episodes, with the best head
+            final = ProjectionHead(store.dim, cfg.hidden)
+            final.load_state_dict(best)
+            state["sigma"] = choose_sigma_on(query_frames(data, final.eval(), data.holdout_objects), cfg.objective)
+        if resumed is None and state["epoch"] == 0:
+            save_state(out, run, head, best, scale, bias, opt, state)
+        return write_head(out, best, store, run, fs, data, cfg, state, finished=not interrupted)
+
+
+def _run_epoch(head: ProjectionHead, scale: torch.Tensor, bias: torch.Tensor, opt: torch.optim.Optimizer,
+               data: TrainData, cfg: TrainConfig, epoch: int) -> dict:
+    """One pass over the epoch's batches, then the held-out AUROC; returns the epoch's history entry."""
+    t0 = dt.datetime.now()
+    head.train()
+    losses = []
+    for crop_idx in epoch_batches(data, cfg, epoch):
+        loss = batch_loss(head, scale, bias, data, crop_idx, cfg)
+        opt.zero_grad(set_to_none=True)
+        loss.backward()
+        opt.step()
+        losses.append(float(loss.detach()))
+    head.eval()
+    val = validation_auroc(query_frames(data, head, data.holdout_objects, relevant_only=True))
+    return dict(epoch=epoch, loss=float(np.mean(losses)) if losses else None, val_auroc=val,
+                seconds=round((dt.datetime.now() - t0).total_seconds(), 2))

@@ -1,0 +1,200 @@
+"""The layered layout: imports run only downward, no cycles, old paths alias the same modules, caches survive moves."""
+
+from __future__ import annotations
+
+import ast
+import subprocess
+import sys
+import warnings
+import zipfile
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+# each top-level part of the code and its floor; a module may import only parts on lower floors, or its own part
+LAYERS = {
+    "pin_match.errors": 0,
+    "pin_match.atomic": 1, "pin_match.outputs": 1,
+    "pin_match.contract": 2,
+    "pin_match.nn": 3, "pin_match.data": 3,
+    "matchers": 4,
+    "pin_match.scoring": 5,
+    "pin_match.evaluation": 6,
+    "pin_match.training": 7, "pin_match.pin_agent": 7,
+    "pin_match.cli": 8,
+}
+# the package's own face: re-exports and the aliases of moved modules, above everything
+FACE = {"pin_match", "pin_match.__main__", "pin_match._moved"}
+
+
+def module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def part_of(module: str) -> str | None:
+    best = None
+    for part in LAYERS:
+        if (module == part or module.startswith(part + ".")) and (best is None or len(part) > len(best)):
+            best = part
+    return best
+
+
+def imports_of(path: Path) -> set[str]:
+    package = module_name(path).rsplit(".", 1)[0] if path.name != "__init__.py" else module_name(path)
+    return imports_of_file(path, package)
+
+
+def imports_of_file(path: Path, package: str) -> set[str]:
+    """Every module a file imports, at module level or inside functions (a lazy import is still a dependency)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    found = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                base = ".".join(package.split(".")[: len(package.split(".")) - node.level + 1] + ([base] if base
+                                                                                                  else []))
+            found.add(base)
+            found.update(f"{base}.{a.name}" for a in node.names)  # `from pin_match import atomic` is a module
+    return {m for m in found if m.split(".")[0] in ("pin_match", "matchers")}
+
+
+def library_files() -> list[Path]:
+    return sorted([*(ROOT / "pin_match").rglob("*.py"), *(ROOT / "matchers").glob("*.py")])
+
+
+def test_every_library_module_belongs_to_a_layer():
+    loose = [module_name(p) for p in library_files() if module_name(p) not in FACE and part_of(module_name(p)) is None]
+    assert not loose, f"modules outside every layer (add them to a subpackage): {loose}"
+
+
+def upward(me: str, targets: set[str]) -> list[str]:
+    """The imports of module ``me`` that do not run downward (to its own part or a lower floor)."""
+    mine = part_of(me)
+    out = []
+    for target in sorted(targets):
+        theirs = part_of(target)
+        if theirs is not None and theirs != mine and LAYERS[theirs] >= LAYERS[mine]:
+            out.append(f"{me} ({mine}, floor {LAYERS[mine]}) imports {target} ({theirs}, floor {LAYERS[theirs]})")
+    return out
+
+
+def test_imports_run_only_downward():
+    found = [v for p in library_files() if module_name(p) not in FACE for v in upward(module_name(p), imports_of(p))]
+    assert not found, "imports that do not run downward:\n" + "\n".join(found)
+
+
+def test_the_layer_rule_reports_an_upward_import_and_allows_a_downward_one(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text("def f():\n    from pin_match.scoring.cache import cache_dir\n")
+    assert upward("pin_match.contract.bad", imports_of_file(bad, "pin_match.contract"))
+    assert not upward("pin_match.scoring.bad", imports_of_file(bad, "pin_match.scoring"))
+
+
+def test_no_import_cycle_between_modules():
+    modules = {module_name(p): p for p in library_files()}
+    graph = {m: {t for t in imports_of(p) if t in modules and t != m and not modules[t].name == "__init__.py"}
+             for m, p in modules.items() if m not in FACE}
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(m: str) -> list[str] | None:
+        state[m] = 1
+        stack.append(m)
+        for n in sorted(graph.get(m, ())):
+            if state.get(n) == 1:
+                return stack[stack.index(n):] + [n]
+            if n not in state and (cycle := visit(n)):
+                return cycle
+        stack.pop()
+        state[m] = 2
+        return None
+
+    for m in sorted(graph):
+        if m not in state and (cycle := visit(m)):
+            pytest.fail("import cycle: " + " -> ".join(cycle))
+
+
+def test_plugins_and_the_template_import_only_the_contract():
+    for name in ("TEMPLATE.py", "classic.py"):
+        found = {m for m in imports_of(ROOT / "matchers" / name) if m.startswith("pin_match")}
+        assert found and all(m == "pin_match.contract" or m.startswith("pin_match.contract.") for m in found), found
+
+
+def test_import_pin_match_loads_neither_pandas_nor_torch():
+    code = "import sys, pin_match; print('pandas' in sys.modules, 'torch' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True, cwd=ROOT)
+    assert out.stdout.split() == ["False", "False"]
+
+
+@pytest.mark.parametrize("old, new", [("pin_match.registry", "pin_match.contract.registry"),
+                                      ("pin_match.frameset", "pin_match.data.frameset"),
+                                      ("pin_match.synth.objects", "pin_match.data.synth.objects"),
+                                      ("pin_match.distributed", "pin_match.scoring.cluster")])
+def test_old_paths_are_the_same_module_objects_with_a_future_warning(old, new):
+    import importlib
+
+    sys.modules.pop(old, None)
+    with pytest.warns(FutureWarning, match=f"{old} moved to {new}"):
+        alias = importlib.import_module(old)
+    assert alias is importlib.import_module(new)
+
+
+def test_a_monkeypatch_through_an_old_path_is_seen_by_the_new(monkeypatch):
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)
+        import pin_match.registry as old
+    from pin_match.contract import registry
+
+    monkeypatch.setattr(old, "_entry_points", lambda: {})
+    assert registry._entry_points() == {}
+
+
+# ids taken from the code as it landed before the layered layout (commit c8c8205): a matcher's id hashes its
+# name, version, config and weights, never a module path, so every cached table stays found
+IDS_BEFORE_THE_MOVE = {"sift": "sift@6515d01cf884", "color": "color@f03ae06173d4", "effnet": "effnet@d1649a13de4e",
+                       "dino": "dino@650a30aaa20a", "owl": "owl@b4264d9cba9d", "clip-grad": "clip-grad@e400bb64f306"}
+
+
+@pytest.mark.parametrize("name", sorted(IDS_BEFORE_THE_MOVE))
+def test_matcher_ids_did_not_change_with_the_move(name):
+    from pin_match.contract import create_matcher
+
+    assert create_matcher(name).id == IDS_BEFORE_THE_MOVE[name]
+
+
+def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
+    """A cache folder written before the move (by its id) is what `tune --matcher` finds now."""
+    import pandas as pd
+
+    from pin_match.scoring.cache import find_score_table
+    from pin_match.scoring.table import COLUMNS, ScoreTable
+
+    folder = tmp_path / IDS_BEFORE_THE_MOVE["color"] / tiny_frameset.fingerprint  # the old cache_dir rule
+    frames = tiny_frameset.frames[["frame_id", "episode_id", "step", "split"]].copy()
+    frames["score"] = 0.5
+    for c in ("crop_scores", "points_x", "points_y", "point_scores"):
+        frames[c] = [[] for _ in range(len(frames))]
+    ScoreTable(frames[COLUMNS], dict(matcher="color", matcher_id=IDS_BEFORE_THE_MOVE["color"])).write(
+        folder / "scores_all.parquet")
+    assert find_score_table(tmp_path, tiny_frameset, "color") == folder / "scores_all.parquet"
+    assert len(pd.read_parquet(folder / "scores_all.parquet")) == len(frames)
+
+
+def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path):
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
+                    str(tmp_path), str(ROOT)], check=True, capture_output=True)
+    (wheel,) = tmp_path.glob("pin_match-*.whl")
+    names = set(zipfile.ZipFile(wheel).namelist())
+    assert "pin_match/evaluation/paper_thresholds.json" in names
+    for package in ("contract", "nn", "data", "data/synth", "scoring", "evaluation", "training", "cli"):
+        assert f"pin_match/{package}/__init__.py" in names, package
+    assert "matchers/TEMPLATE.py" in names
+    assert not any(n.startswith("pin_match/data/") and n.endswith((".png", ".npy")) for n in names)

@@ -1,0 +1,57 @@
+"""Every command, given bad input that argparse accepts, ends in one line on stderr and exit 2: never a traceback."""
+
+from __future__ import annotations
+
+import pytest
+
+from pin_match.cli import build_parser, main
+
+
+def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
+    missing = f"{tmp}/missing"
+    return [
+        ["synth", f"{tmp}/s1", "--episodes", "1"],
+        ["synth", f"{tmp}/s2", "--objects-per-category", "1"],
+        ["synth", f"{tmp}/s3", "--frames-per-episode", "0"],
+        ["import", missing, "--objects", missing, "--out", f"{tmp}/imported"],
+        ["realset", fs],  # an existing frame-set, without --overwrite
+        ["score", missing, "--matcher", "color"],
+        ["score", fs, "--matcher", "no-such-matcher"],
+        ["score", fs, "--matcher", "color", "--shard", "3/3"],
+        ["score", fs, "--matcher", "color", "--shard", "one-of-two"],
+        ["score", fs, "--matcher", "color", "--cfg", "crops"],
+        ["score", fs, "--matcher", "color", "--cfg", "no_such_key=1"],
+        ["score", fs, "--matcher", "color", "--cfg", "crops=tiles"],
+        ["score", fs, "--matcher", "sift", "--weights", missing],
+        ["merge", f"{missing}.parquet", "--out", f"{tmp}/merged.parquet"],
+        ["tune", "--frameset", missing, "--matcher", "color"],
+        ["tune", "--frameset", fs, "--matcher", "color", "--cache", missing],
+        ["tune", "--frameset", fs],
+        ["report", "--frameset", fs, "--matcher", "color", "--cache", missing],
+        ["report", f"{missing}.parquet", "--frameset", fs],
+        ["similarity", missing, "--matcher", "color"],
+        ["similarity", fs, "--matcher", "color", "--split", "no-such-split"],
+        ["bench", missing, "--matcher", "color"],
+        ["bench", fs, "--matcher", "no-such-matcher"],
+        ["demo", "--matcher", "no-such-matcher", "--out", f"{tmp}/demo"],
+        ["features", fs, "--backbone", "color"],
+        ["features", missing, "--backbone", "effnet"],
+        ["train", fs, "--out", f"{tmp}/head", "--holdout", "2"],
+        ["train", missing, "--out", f"{tmp}/head"],
+    ]
+
+
+def test_the_bad_arguments_cover_every_command(tiny_frameset, tmp_path):
+    commands = set(build_parser()._subparsers._group_actions[0].choices) - {"list"}  # list takes no bad value
+    assert commands == {args[0] for args in bad_arguments(str(tiny_frameset.root), str(tmp_path))}
+
+
+@pytest.mark.parametrize("index", range(len(bad_arguments("FS", "TMP"))),
+                         ids=[" ".join(a) for a in bad_arguments("FS", "TMP")])
+def test_bad_input_gives_one_line_and_exit_2(index, tiny_frameset, tmp_path, capsys):
+    args = bad_arguments(str(tiny_frameset.root), str(tmp_path))[index]
+    code = main(args)  # an exception other than PinMatchError would escape here and fail the test
+    err = capsys.readouterr().err.strip()
+    assert code == 2, err
+    assert "Traceback" not in err and len(err.splitlines()) == 1, err
+    assert err.startswith(f"pin-match {args[0]}: error: "), err
