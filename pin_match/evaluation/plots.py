@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -11,8 +12,13 @@ from pin_match import atomic
 from pin_match.evaluation.metrics import CLASSES, frame_arrays
 
 MAX_PLOT_POINTS = 2000
+TITLE_WIDTH = 0.96  # share of the figure's width a title line may take
+# where a title may break, most readable first: between clauses (after a comma, before a parenthesis: the
+# sigma's provenance "(tuned: first-match on train)" stays one line), between words, inside a word (a long id)
+TITLE_BREAKS = (r"(?<=,) | (?=\()", " ", "")
 
-def _figure(path: Path, draw) -> None:
+
+def _figure(path: Path, title: str, draw) -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -21,11 +27,50 @@ def _figure(path: Path, draw) -> None:
     fig, ax = plt.subplots(figsize=(7, 4.2))
     try:
         draw(ax)
+        if title:
+            _fit_title(fig, title)
         fig.tight_layout()
         with atomic.atomic_path(path) as tmp:
             fig.savefig(tmp, format="png", dpi=120)
     finally:
         plt.close(fig)
+
+
+def _fit_title(fig, title: str) -> None:
+    """The title over the whole figure, broken into lines that fit its width, so no part of it is cut off.
+
+    Report titles end with where sigma came from, the part a reader must not lose. Over the figure,
+    not the axes: an axes title is centred on the axes, which the y label shifts right.
+    """
+    text = fig.suptitle(title)
+    renderer = fig.canvas.get_renderer()
+    limit = TITLE_WIDTH * fig.bbox.width
+
+    def fits(line: str) -> bool:
+        text.set_text(line)
+        return text.get_window_extent(renderer).width <= limit
+
+    text.set_text("\n".join(_lines(title, fits)))
+
+
+def _lines(text: str, fits, level: int = 0) -> list[str]:
+    """Greedy line filling at ``TITLE_BREAKS[level]``; a piece too wide alone is broken at the next level."""
+    if level == len(TITLE_BREAKS) or fits(text):
+        return [text]
+    pieces = re.split(TITLE_BREAKS[level], text) if TITLE_BREAKS[level] else list(text)
+    joint = " " if TITLE_BREAKS[level] else ""
+    lines: list[str] = []
+    current = ""
+    for piece in pieces:
+        candidate = f"{current}{joint}{piece}" if current else piece
+        if fits(candidate):
+            current = candidate
+            continue
+        if current:
+            lines.append(current)
+        *full, current = _lines(piece, fits, level + 1)
+        lines += full
+    return [*lines, current]
 
 
 def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
@@ -39,10 +84,10 @@ def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title
             ax.plot(c["sigma"], c[key], label=label, linestyle="--" if key == "match_pct" else "-",
                     drawstyle="steps-pre")
         ax.axvline(sigma, color="k", linewidth=0.8, label=f"sigma = {sigma:g}")
-        ax.set(xlabel="sigma", ylabel="%", ylim=(-2, 102), title=title)
+        ax.set(xlabel="sigma", ylabel="%", ylim=(-2, 102))
         ax.legend(fontsize=8)
 
-    _figure(Path(path), draw)
+    _figure(Path(path), title, draw)
 
 
 def plot_score_distributions(scored: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
@@ -57,10 +102,10 @@ def plot_score_distributions(scored: pd.DataFrame, sigma: float, path: str | Pat
             if s.size:
                 ax.hist(s, bins=bins, density=True, histtype="step", label=f"{names[cls]} ({s.size})")
         ax.axvline(sigma, color="k", linewidth=0.8)
-        ax.set(xlabel="score", ylabel="density", title=title)
+        ax.set(xlabel="score", ylabel="density")
         ax.legend(fontsize=8)
 
-    _figure(Path(path), draw)
+    _figure(Path(path), title, draw)
 
 
 def plot_per_category(categories: pd.DataFrame, path: str | Path, title: str = "") -> None:
@@ -75,7 +120,7 @@ def plot_per_category(categories: pd.DataFrame, path: str | Path, title: str = "
             bottom += values
         ax.plot(x, categories["match_pct"], "k^", label="%Match")
         ax.set_xticks(x, categories.index, rotation=45, ha="right")
-        ax.set(ylabel="%", ylim=(0, 105), title=title)
+        ax.set(ylabel="%", ylim=(0, 105))
         ax.legend(fontsize=8)
 
-    _figure(Path(path), draw)
+    _figure(Path(path), title, draw)

@@ -58,7 +58,9 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
     """A ``distributed.Client``: ``"local"`` starts a cluster of ``workers`` processes here (closed with the
     client); a path to an existing JSON file is a scheduler file; anything else is a scheduler address.
 
-    An unreachable scheduler raises ``DistributedError`` after ``timeout`` seconds.
+    An unreachable scheduler raises ``DistributedError`` after ``timeout`` seconds. The address goes to
+    Dask as given, with no ``security=``: Dask's configured TLS settings (its config files, ``DASK_*``
+    variables) apply, so ``tls://`` works from the command line too.
     """
     try:
         from distributed import Client
@@ -75,6 +77,10 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
         return Client(**where, timeout=timeout)
     except (OSError, TimeoutError, ValueError) as exc:
         raise DistributedError(f"cannot reach the Dask scheduler {scheduler!r} within {timeout:g} s: {exc}") from exc
+    # Dask's own refusals: tls:// with no client certificate configured, tcp:// where its config requires encryption
+    except (TypeError, RuntimeError) as exc:
+        raise DistributedError(f"Dask refuses to connect to {scheduler!r}: {exc} (Dask's TLS settings: "
+                               "docs/distributed.md, section Security)") from exc
 
 
 def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path,
