@@ -138,6 +138,17 @@ def test_forward_returns_what_pin_detectors_return(tiny_frameset):
     assert above(top, references, category=captions).sum() == 0  # below sigma: an all-zero map
 
 
+def test_a_detection_on_out_of_range_depth_is_none_to_the_agent(tiny_frameset):
+    references, captions = pin_references(tiny_frameset, "mug_a")
+    detector = PinDetector("color", sigma=0.5)
+    detector.reset()
+    obs = dict(rgb=tiny_frameset.image("ep_train_0000"), depth=tiny_frameset.depth("ep_train_0000"))
+    found, frame_map = agent_step(detector, obs, references, captions)
+    assert found and detector.last_score >= 0.5
+    obs["depth"] = np.where(frame_map.numpy() > 0, MAX_DEPTH_REPLACEMENT_VALUE, obs["depth"])
+    assert agent_step(detector, obs, references, captions)[0] is False
+
+
 def test_a_square_is_one_crop_for_every_crop_policy(tiny_frameset):
     """The agent's square reaches the matcher whole: the same verdict under crops=pin and crops=whole."""
     references, captions = pin_references(tiny_frameset, "mug_a")
@@ -172,9 +183,11 @@ def test_sigma_from_a_tuned_file_the_paper_or_given(tiny_frameset, tmp_path):
 
 def test_built_from_pin_cow_config():
     cow = {"method": "pin_match", "matcher": "color", "sigma": 0.7, "resize_dim": 256,
-           "matcher_cfg": {"work_size": 64}}
+           "matcher_cfg": {"work_size": 64, "windows": [6, 12]}}
     detector = PinDetector.from_cow_config(cow, device="cpu")
-    assert detector.sigma == 0.7 and detector.resize_dim == 256 and detector.matcher.cfg.work_size == 64
+    assert detector.sigma == 0.7 and detector.resize_dim == 256
+    assert detector.matcher.cfg.work_size == 64 and detector.matcher.cfg.windows == (6, 12)
+    assert detector.matcher.id == create_matcher("color", work_size=64, windows=(6, 12)).id
     with pytest.raises(PinMatchError, match="cow.matcher: name the pin_match matcher"):
         PinDetector.from_cow_config({"method": "pin_match", "sigma": 0.7})
 

@@ -71,7 +71,8 @@ class PinDetector:
         """From the ``cow`` section of a PIN config: matcher, thresholds or sigma, resize_dim, matcher_cfg."""
         if cow.get("matcher") is None:
             raise ConfigError("cow.matcher: name the pin_match matcher (e.g. effnet) when cow.method is pin_match")
-        matcher_cfg = dict(cow.get("matcher_cfg") or {})
+        matcher_cfg = {key: tuple(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
+                       for key, value in dict(cow.get("matcher_cfg") or {}).items()}  # YAML lists: tuple fields
         if device is not None:
             matcher_cfg.setdefault("device", str(device))
         return cls(str(cow["matcher"]), sigma=cow.get("sigma"), thresholds=cow.get("thresholds"),
