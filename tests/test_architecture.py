@@ -189,8 +189,13 @@ def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
 
 
 def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path):
+    import shutil
+
+    source = tmp_path / "source"  # a copy, so the build leaves nothing in the checkout
+    shutil.copytree(ROOT, source, ignore=shutil.ignore_patterns(".git", "build", "dist", "pin_match_runs", "*.egg-info",
+                                                                "__pycache__", ".*_cache", "notebooks"))
     subprocess.run([sys.executable, "-m", "pip", "wheel", "--no-deps", "--no-build-isolation", "-q", "-w",
-                    str(tmp_path), str(ROOT)], check=True, capture_output=True)
+                    str(tmp_path), str(source)], check=True, capture_output=True)
     (wheel,) = tmp_path.glob("pin_match-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
     assert "pin_match/evaluation/paper_thresholds.json" in names

@@ -14,7 +14,7 @@ pytest.importorskip("distributed")
 import distributed  # noqa: E402
 
 from pin_match.cli import main  # noqa: E402
-from pin_match.distributed import DistributedError, connect  # noqa: E402
+from pin_match.scoring.cluster import DistributedError, connect  # noqa: E402
 
 ADDRESS = "tls://node01.example.org:8786"
 
@@ -63,7 +63,7 @@ def _connect_in_child(address: str, settings: dict[str, str]) -> str:
     """connect(address)'s error in a child process with these environment variables (this one's Dask config stays)."""
     root = str(Path(__file__).resolve().parents[1])
     env = {**os.environ, **settings, "PYTHONPATH": os.pathsep.join([root, os.environ.get("PYTHONPATH", "")])}
-    script = ("import sys\nfrom pin_match.distributed import DistributedError, connect\n"
+    script = ("import sys\nfrom pin_match.scoring.cluster import DistributedError, connect\n"
               "try:\n    connect(sys.argv[1], timeout=2)\nexcept DistributedError as exc:\n    print(exc)\n")
     run = subprocess.run([sys.executable, "-c", script, address], env=env, capture_output=True, text=True, timeout=120)
     assert run.returncode == 0, run.stderr

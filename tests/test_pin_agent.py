@@ -21,14 +21,14 @@ import torchvision.transforms as T
 from torchvision.transforms.functional import resize
 
 from pin_match.cli import main as cli_main
+from pin_match.contract.registry import create_matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.data.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
 from pin_match.errors import PinMatchError
-from pin_match.frameset import FrameSet
-from pin_match.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
-from pin_match.labels import frame_labels
-from pin_match.metrics import detection_metrics
+from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.metrics import detection_metrics
+from pin_match.evaluation.sigma import SigmaError
 from pin_match.pin_agent import FrameRecorder, PinAgentError, PinDetector, RecordingError
-from pin_match.registry import create_matcher
-from pin_match.sigma import SigmaError
 
 RESIZE_DIM = 224
 MIN_DEPTH_REPLACEMENT_VALUE, MAX_DEPTH_REPLACEMENT_VALUE = 10000, 10001  # home_robot.utils.constants
@@ -166,8 +166,8 @@ def test_a_square_is_one_crop_for_every_crop_policy(tiny_frameset):
 
 # ---------------------------------------------------------------------- detector: sigma and construction
 def test_sigma_from_a_tuned_file_the_paper_or_given(tiny_frameset, tmp_path):
+    from pin_match.evaluation.tuning import tune, write_thresholds
     from pin_match.scoring import score
-    from pin_match.tuning import tune, write_thresholds
 
     table = score(tiny_frameset, "color", out=tmp_path / "scores", progress=False)
     tuned = tune(table, tiny_frameset, objective="f1", split="train")
@@ -293,7 +293,7 @@ def metrics_of(fs: FrameSet, out) -> dict:
 
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory):
-    from pin_match.synth import generate
+    from pin_match.data.synth import generate
 
     return generate(tmp_path_factory.mktemp("synth") / "fs", seed=1, episodes=2, objects_per_category=2,
                     frames_per_episode=6, workers=1)

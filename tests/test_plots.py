@@ -8,11 +8,11 @@ import matplotlib
 import pandas as pd
 import pytest
 
-from pin_match.registry import available_names
-from pin_match.report import report
-from pin_match.scoretable import ScoreTable
-from pin_match.sigma import SigmaChoice
-from pin_match.tuning import OBJECTIVES
+from pin_match.contract.registry import available_names
+from pin_match.evaluation.report import report
+from pin_match.evaluation.sigma import SigmaChoice
+from pin_match.evaluation.tuning import OBJECTIVES
+from pin_match.scoring.table import ScoreTable
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -81,7 +81,7 @@ def test_report_plots_keep_titles_and_legends_inside_the_figure(tiny_frameset, t
 
 
 def test_titles_break_between_clauses_first_then_words_then_inside_a_word():
-    from pin_match.plots import _lines
+    from pin_match.evaluation.plots import _lines
 
     def fits(line: str) -> bool:
         return len(line) <= 30

@@ -9,7 +9,7 @@ a top and a bottom square, resizes each to ``cow.resize_dim`` and calls
 as PIN's ``PersOwl`` and ``DINOMatcher`` do; the threshold is applied here, never in the matcher.
 
 The agent hands over one square at a time. A square is one crop under both crop policies of
-``pin_match.crops`` (``pin`` and ``whole`` alike), so the matcher scores exactly the square the
+``pin_match.contract.crops`` (``pin`` and ``whole`` alike), so the matcher scores exactly the square the
 agent shows it, and the frame's verdict (either square matched) is the agent's own max over
 its two squares.
 """
@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 import torch
 
+from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Matcher, MatchResult, Modality, Target
+from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
-from pin_match.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Matcher, MatchResult, Modality, Target
-from pin_match.registry import create_matcher
-from pin_match.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
+from pin_match.evaluation.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
 
 
 class PinAgentError(PinMatchError, ValueError):

@@ -10,9 +10,9 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
+from pin_match.data.frameset import SPLITS
+from pin_match.data.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
 from pin_match.errors import PinMatchError
-from pin_match.frameset import SPLITS
-from pin_match.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
 
 _MISSING = object()
 

@@ -23,8 +23,8 @@ from typing import Any
 import numpy as np
 
 from pin_match import atomic
+from pin_match.data.importer import LABELS, TARGET_ID
 from pin_match.errors import PinMatchError
-from pin_match.importer import LABELS, TARGET_ID
 from pin_match.pin_agent.episode import episode_record, labels_in_episode
 
 INDEX = "episodes.json"

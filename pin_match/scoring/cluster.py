@@ -69,7 +69,7 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
     if scheduler == "local":
         n = workers or min(2, os.cpu_count() or 1)
         threads = str(max(1, (os.cpu_count() or 1) // n))  # the processes share this machine's cores
-        return Client(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
+        return Client(n_workers=n, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
                       env={"OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads})
     where = dict(scheduler_file=scheduler) if scheduler.endswith(".json") and Path(scheduler).is_file() \
         else dict(address=scheduler)
