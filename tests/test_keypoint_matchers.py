@@ -15,10 +15,10 @@ from conftest import make_view
 from matchers.keypoint import (
     count_verdict,
     gated_count,
+    normalize_keypoints,
     prepare_references,
     square_box,
     superglue_verdict,
-    to_frame_of,
     valid_matches,
 )
 from pin_match import registry
@@ -88,11 +88,12 @@ def test_reference_crop_leaving_the_view_is_padded_white():
     assert (ref.image[:60, :] == 255).all() and (ref.image[:, :60] == 255).all()
 
 
-@pytest.mark.parametrize("normalize", [superglue_normalize, lightglue_normalize])
-def test_reference_keypoints_moved_into_the_frame_keep_their_own_normalisation(normalize):
-    xy = torch.tensor([[0.0, 0.0], [359.0, 12.0], [180.0, 180.0], [33.0, 300.0]])
-    moved = to_frame_of(xy, (360, 360), (640, 360))
-    torch.testing.assert_close(normalize(moved[None], 640, 360), normalize(xy[None], 360, 360))
+@pytest.mark.parametrize("normalize, scale", [(superglue_normalize, 0.7), (lightglue_normalize, 0.5)])
+def test_keypoints_are_normalised_with_their_own_image_size_as_the_models_do(normalize, scale):
+    xy = torch.tensor([[0.0, 0.0], [639.0, 12.0], [180.0, 180.0], [33.0, 359.0]])
+    torch.testing.assert_close(normalize_keypoints(xy, 360, 640, scale), normalize(xy[None], 360, 640)[0])
+    # the longer side sets the scale: (639 - 320) / (scale * 640), (359 - 180) / (scale * 640)
+    assert normalize_keypoints(xy, 360, 640, scale)[3, 1] == pytest.approx(179 / (scale * 640))
 
 
 # ---------------------------------------------------------------------------- the match rules
@@ -247,7 +248,9 @@ def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, 
     m.prepare(target)
     assert len(m._refs) == 6
     detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
-    assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, 48)
+    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (matchers.keypoint.detect)
+    assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, -1)
+    assert all(len(k.xy) <= 48 for k, _, _ in m._refs)
     if name == "superglue":
         assert m.cfg.sinkhorn_iterations == 20  # read by superglue_pair, not by the model's own config
     rng = np.random.default_rng(0)
@@ -337,7 +340,7 @@ def reference_superglue(model, image0, image1, iterations, threshold):
     return np.where(mutual & (p.max(1) > threshold), p.max(1), 0.0)
 
 
-def corner_keypoints(detector, grays, device):
+def corner_keypoints(detector, grays, device, max_keypoints=-1):
     """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
     equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
     9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
