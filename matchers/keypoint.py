@@ -144,7 +144,7 @@ def border_and_top_k(xy: torch.Tensor, scores: torch.Tensor, border: int, height
 def detect(detector: torch.nn.Module, grays: Sequence[np.ndarray], device: str, max_keypoints: int) -> list[Keypoints]:
     """Run SuperPoint on same-size grayscale uint8 images (one batch), with magicleap's border and top-k rules.
 
-    The detector must be built with ``max_keypoints=-1`` (``GlueMatcher._configure_detector``): it returns
+    The detector must be built with ``max_keypoints=-1`` (``SuperPointGlueMatcher._configure_detector``): it returns
     every thresholded NMS maximum, and ``border_and_top_k`` keeps SuperPoint's. Descriptors are sampled per
     keypoint, so selecting rows afterwards gives the same descriptors as sampling only the kept keypoints.
     """
