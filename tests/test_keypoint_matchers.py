@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from tiny_weights import save_tiny_lightglue, save_tiny_superglue
+from tiny_weights import save_tiny_lightglue, save_tiny_superglue, save_tiny_superglue_peaky
 from transformers.models.lightglue.modeling_lightglue import normalize_keypoints as lightglue_normalize
 from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
 
@@ -367,17 +367,7 @@ def corner_keypoints(detector, grays, device, max_keypoints=-1):
 
 @pytest.fixture(scope="module")
 def superglue_peaky_dir(tmp_path_factory):
-    """Random SuperGlue weights drawn wider than the default, so its assignment is peaked enough for real matches."""
-    import transformers
-    from tiny_weights import TINY_SUPERPOINT
-
-    torch.manual_seed(0)
-    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
-                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"] * 2,
-                                          num_attention_heads=2, initializer_range=0.2)
-    path = tmp_path_factory.mktemp("superglue_peaky")
-    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
-    return str(path)
+    return save_tiny_superglue_peaky(tmp_path_factory.mktemp("superglue_peaky"))
 
 
 @pytest.mark.parametrize("iterations", [20, 3])
