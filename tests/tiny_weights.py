@@ -65,6 +65,26 @@ def save_tiny_superglue(path: Path) -> str:
     return str(path)
 
 
+def save_tiny_superglue_peaky(path: Path, border_bias: float = 0.0) -> str:
+    """SuperGlue weights drawn wider than the default (std 0.2), so its assignment is peaked enough for real matches.
+
+    ``border_bias`` is added to SuperPoint's score logits for the pixels (1, 1) and (6, 6) of every 8x8 cell:
+    every cell then peaks 1 or 2 px from its edges, so the image's outer cells put keypoints in the 4 px
+    border band on all four sides (what SuperPoint must remove).
+    """
+    import transformers
+
+    torch.manual_seed(0)
+    config = transformers.SuperGlueConfig(keypoint_detector_config=TINY_SUPERPOINT, hidden_size=32,
+                                          keypoint_encoder_sizes=[8, 16], gnn_layers_types=["self", "cross"] * 2,
+                                          num_attention_heads=2, initializer_range=0.2)
+    model = transformers.SuperGlueForKeypointMatching(config)
+    with torch.no_grad():
+        model.keypoint_detector.keypoint_decoder.conv_score_b.bias[[1 * 8 + 1, 6 * 8 + 6]] += border_bias
+    model.save_pretrained(path)
+    return str(path)
+
+
 def save_tiny_lightglue(path: Path) -> str:
     import transformers
 
