@@ -329,6 +329,13 @@ def lightglue_confidence_threshold(layer: int, layers: int) -> float:
     return min(max(0.8 + 0.1 * math.exp(-4.0 * layer / layers), 0.0), 1.0)
 
 
+def lightglue_inputs(model: torch.nn.Module, k: Keypoints) -> tuple[torch.Tensor, tuple[torch.Tensor, torch.Tensor]]:
+    """One image's projected descriptors and the rotary encoding (cos, sin) of its normalised keypoints."""
+    angles = model.positional_encoder.projector(normalize_keypoints(k.xy, k.height, k.width, 0.5))
+    angles = angles.repeat_interleave(2, dim=-1)
+    return model.input_projection(k.descriptors), (angles.cos(), angles.sin())
+
+
 def lightglue_pair(model: torch.nn.Module, obs: Keypoints, ref: Keypoints,
                    threshold: float) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
     """LightGlue on one pair of unpadded keypoint sets, with its adaptive depth and width as in cvg/LightGlue on CPU.
@@ -343,12 +350,8 @@ def lightglue_pair(model: torch.nn.Module, obs: Keypoints, ref: Keypoints,
     layers = cfg.num_hidden_layers
     m, n = len(obs.xy), len(ref.xy)
     index = [torch.arange(m, device=obs.xy.device), torch.arange(n, device=obs.xy.device)]
-    desc, rotary = [], []
-    for k in (obs, ref):
-        desc.append(model.input_projection(k.descriptors))
-        angles = model.positional_encoder.projector(normalize_keypoints(k.xy, k.height, k.width, 0.5))
-        angles = angles.repeat_interleave(2, dim=-1)
-        rotary.append((angles.cos(), angles.sin()))
+    (d0, r0), (d1, r1) = lightglue_inputs(model, obs), lightglue_inputs(model, ref)
+    desc, rotary = [d0, d1], [r0, r1]
     for i in range(layers):
         if not len(index[0]) or not len(index[1]):
             break

@@ -22,8 +22,7 @@ from test_keypoint_matchers import reference_superglue
 from tiny_weights import save_tiny_superglue_peaky
 
 from matchers.keypoint import prepare_references
-from pin_match.matcher import Target
-from pin_match.registry import create_matcher
+from pin_match.contract import Target, create_matcher
 
 BORDER = 4
 
