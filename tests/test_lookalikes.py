@@ -1,0 +1,142 @@
+"""The look-alike set builder: automatic masks, the instance split, episode plans and both variants."""
+
+from __future__ import annotations
+
+import cv2
+import numpy as np
+import pytest
+
+from pin_match import atomic
+from pin_match.lookalikes import (
+    PHOTO_COLUMNS,
+    ROOM_COLUMNS,
+    LookalikeError,
+    Photo,
+    _write_csv,
+    build,
+    instance_splits,
+    object_mask,
+    plan_episodes,
+)
+
+
+def _photo(colour: tuple[int, int, int], seed: int, hand: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """A 128 px 'photo': a coloured disk held by a skin-coloured bar, on a noisy grey wall; and the disk's mask."""
+    rng = np.random.default_rng(seed)
+    img = np.clip(rng.normal(150, 6, (128, 128, 3)), 0, 255).astype(np.uint8)
+    disk = np.zeros((128, 128), np.uint8)
+    cv2.circle(disk, (64, 60), 30, 1, -1)
+    if hand:
+        img[85:128, 50:80] = (205, 150, 125)  # skin tone (RGB), below the disk
+    img[disk > 0] = colour
+    return img, disk
+
+
+def test_object_mask_keeps_the_object_and_drops_the_hand():
+    img, disk = _photo((30, 60, 200), 0)
+    mask = object_mask(img) > 0
+    iou = (mask & (disk > 0)).sum() / (mask | (disk > 0)).sum()
+    assert iou > 0.9
+    assert mask[95:128, 50:80].mean() < 0.1  # the hand below the disk stays out
+
+
+def test_object_mask_is_deterministic():
+    img, _ = _photo((200, 40, 40), 3)
+    assert np.array_equal(object_mask(img), object_mask(img))
+
+
+def _photos(spec: dict[str, tuple[str, int]]) -> list[Photo]:
+    return [Photo(f"{inst}_{k}", inst, cat, f"photos/{inst}_{k}.png", f"masks/{inst}_{k}.png")
+            for inst, (cat, n) in spec.items() for k in range(n)]
+
+
+SPEC = {"a1": ("mug", 4), "a2": ("mug", 2), "a3": ("mug", 1), "a4": ("mug", 2), "b1": ("ball", 2), "b2": ("ball", 2)}
+
+
+def test_instance_split_halves_each_category():
+    split = instance_splits(_photos(SPEC))
+    mugs = [split[i] for i in ("a1", "a2", "a3", "a4")]
+    balls = [split[i] for i in ("b1", "b2")]
+    assert sorted(mugs) == ["train", "train", "val", "val"]
+    assert sorted(balls) == ["train", "val"]
+
+
+def test_plan_episodes_frames_and_references():
+    photos = _photos(SPEC)
+    split = instance_splits(photos)
+    plans = {p.target: p for p in plan_episodes(photos, ["room1", "room2"])}
+    # balls: one per split, so no ball has a look-alike in its own split
+    assert not {"b1", "b2"} & set(plans)
+    for target, plan in plans.items():
+        own = [p.photo_id for p in photos if p.instance_id == target]
+        n_ref = min(3, len(own) - 1)
+        assert plan.reference_photos == tuple(own[:n_ref])
+        kinds = [k for k, _ in plan.frames]
+        assert sorted(pid for k, pid in plan.frames if k == "target") == own[n_ref:]
+        same = [p.photo_id for p in photos if p.category == "mug" and p.instance_id != target
+                and split[p.instance_id] == split[target]]
+        assert sorted(pid for k, pid in plan.frames if k == "lookalike") == sorted(same)
+        assert kinds.count("empty") == 3
+        # other-category frames come from the target's split only
+        assert all(split[pid.rsplit("_", 1)[0]] == split[target] for k, pid in plan.frames if k == "other")
+    assert plans == {p.target: p for p in plan_episodes(photos, ["room1", "room2"])}
+
+
+def _source(root, colours: dict[str, tuple[int, int, int]], per_instance: int = 2) -> None:
+    rows = []
+    for n, (inst, colour) in enumerate(colours.items()):
+        for k in range(per_instance):
+            img, disk = _photo(colour, 10 * n + k)
+            atomic.write_image(root / f"photos/{inst}_{k}.png", img)
+            atomic.write_image(root / f"masks/{inst}_{k}.png", disk * 255)
+            rows.append(dict(photo_id=f"{inst}_{k}", instance_id=inst, category=inst[:-1],
+                             file=f"photos/{inst}_{k}.png", mask=f"masks/{inst}_{k}.png",
+                             source="test", source_path="-", licence="-"))
+    _write_csv(root / "photos.csv", PHOTO_COLUMNS, rows)
+    room = np.clip(np.random.default_rng(7).normal(90, 20, (240, 320, 3)), 0, 255).astype(np.uint8)
+    atomic.write_image(root / "rooms/r1.png", room)
+    _write_csv(root / "rooms.csv", ROOM_COLUMNS,
+               [dict(room_id="r1", file="rooms/r1.png", source="test", source_path="-", licence="-")])
+
+
+# two instances per category in each split: "mug" x4 and "cap" x4 (hash-ranked halves)
+COLOURS = {"mug1": (200, 30, 30), "mug2": (30, 200, 30), "mug3": (30, 30, 200), "mug4": (200, 200, 30),
+           "cap1": (200, 30, 200), "cap2": (30, 200, 200), "cap3": (250, 250, 250), "cap4": (10, 10, 10)}
+
+
+@pytest.mark.parametrize("variant", ["shot", "pasted"])
+def test_build_writes_roles_from_masks_and_is_deterministic(tmp_path, variant):
+    _source(tmp_path / "src", COLOURS)
+    fs = build(tmp_path / "src", tmp_path / "a", variant=variant)
+    again = build(tmp_path / "src", tmp_path / "b", variant=variant)
+    assert list(fs.frames.sha256) == list(again.frames.sha256)
+    assert fs.visibility.equals(again.visibility)
+    assert len(fs.episodes) == 8  # every instance has 2 photos and one same-split look-alike
+    vis = fs.visibility.merge(fs.frames[["frame_id", "episode_id"]], on="frame_id")
+    for ep in fs.episodes.itertuples():
+        rows = vis[vis.episode_id == ep.episode_id]
+        assert (rows[rows.role == "target"].object_id == ep.target_object_id).all()
+        assert len(rows[rows.role == "target"]) == 1  # 2 photos: one for references, one frame
+        same = rows[rows.role == "same_category"]
+        assert len(same) == 2 and set(same.object_id) != {ep.target_object_id}
+        assert (fs.objects.set_index("object_id").category[same.object_id] == ep.target_category).all()
+    frame = fs.frames.frame_id.iloc[0]
+    assert fs.image(frame).shape == (640, 360, 3)
+    target_row = vis[vis.role == "target"].iloc[0]
+    expected = 30 * 30 * np.pi * (360 / 128) ** 2 if variant == "shot" else None
+    if expected is not None:  # a letterboxed photo keeps the disk's area, scaled by the frame width
+        assert abs(target_row.pixels - expected) / expected < 0.05
+    views = fs.target(fs.episodes.target_object_id.iloc[0]).views
+    assert len(views) == 3 and all(v.shape[2] == 4 for v in views)
+    assert np.array_equal(views[1][..., 3], views[0][..., 3][:, ::-1])  # one reference photo: view 1 is its mirror
+
+
+def test_build_errors_name_the_problem(tmp_path):
+    with pytest.raises(LookalikeError, match="photos.csv"):
+        build(tmp_path, tmp_path / "out")
+    _source(tmp_path / "src", {"mug1": (200, 30, 30), "cap1": (30, 200, 30)})
+    with pytest.raises(LookalikeError, match="variant"):
+        build(tmp_path / "src", tmp_path / "out", variant="drawn")
+    with pytest.raises(LookalikeError, match="nothing to build"):
+        build(tmp_path / "src", tmp_path / "out")
+    assert not (tmp_path / "out").exists()
