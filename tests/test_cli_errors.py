@@ -15,6 +15,9 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["synth", f"{tmp}/s3", "--frames-per-episode", "0"],
         ["import", missing, "--objects", missing, "--out", f"{tmp}/imported"],
         ["realset", fs],  # an existing frame-set, without --overwrite
+        ["lookalikes", fs],
+        ["lookalikes", "--variant", "pasted"],
+        ["lookalikes", "--prepare-from", missing, missing, "--src", f"{tmp}/src"],
         ["score", missing, "--matcher", "color"],
         ["score", fs, "--matcher", "no-such-matcher"],
         ["score", fs, "--matcher", "color", "--shard", "3/3"],

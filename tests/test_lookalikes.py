@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
-from pin_match.lookalikes import (
+from pin_match.data.lookalikes import (
     PHOTO_COLUMNS,
     ROOM_COLUMNS,
     LookalikeError,
@@ -107,8 +107,8 @@ COLOURS = {"mug1": (200, 30, 30), "mug2": (30, 200, 30), "mug3": (30, 30, 200), 
 @pytest.mark.parametrize("variant", ["shot", "pasted"])
 def test_build_writes_roles_from_masks_and_is_deterministic(tmp_path, variant):
     _source(tmp_path / "src", COLOURS)
-    fs = build(tmp_path / "src", tmp_path / "a", variant=variant)
-    again = build(tmp_path / "src", tmp_path / "b", variant=variant)
+    fs = build(tmp_path / "a", tmp_path / "src", variant=variant)
+    again = build(tmp_path / "b", tmp_path / "src", variant=variant)
     assert list(fs.frames.sha256) == list(again.frames.sha256)
     assert fs.visibility.equals(again.visibility)
     assert len(fs.episodes) == 8  # every instance has 2 photos and one same-split look-alike
@@ -133,10 +133,10 @@ def test_build_writes_roles_from_masks_and_is_deterministic(tmp_path, variant):
 
 def test_build_errors_name_the_problem(tmp_path):
     with pytest.raises(LookalikeError, match="photos.csv"):
-        build(tmp_path, tmp_path / "out")
+        build(tmp_path / "out", tmp_path)
     _source(tmp_path / "src", {"mug1": (200, 30, 30), "cap1": (30, 200, 30)})
     with pytest.raises(LookalikeError, match="variant"):
-        build(tmp_path / "src", tmp_path / "out", variant="drawn")
+        build(tmp_path / "out", tmp_path / "src", variant="drawn")
     with pytest.raises(LookalikeError, match="nothing to build"):
-        build(tmp_path / "src", tmp_path / "out")
+        build(tmp_path / "out", tmp_path / "src")
     assert not (tmp_path / "out").exists()

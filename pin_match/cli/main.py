@@ -51,6 +51,18 @@ def _cmd_realset(a: argparse.Namespace) -> None:
     print(f"wrote {fs}")
 
 
+def _cmd_lookalikes(a: argparse.Namespace) -> None:
+    from pin_match.data.lookalikes import LookalikeError, build, prepare_core50
+
+    if (a.src if a.prepare_from else a.out) is None:
+        raise LookalikeError("--prepare-from writes the source folder --src: name it" if a.prepare_from else
+                             "name the frame-set folder to create: pin-match lookalikes OUT")
+    if a.prepare_from:
+        print(f"wrote {prepare_core50(*a.prepare_from, a.src, overwrite=a.overwrite)}")
+        return
+    print(f"wrote {build(a.out, a.src, variant=a.variant, seed=a.seed, overwrite=a.overwrite)}")
+
+
 def _cmd_import(a: argparse.Namespace) -> None:
     from pin_match.data.importer import import_recording
 
@@ -130,6 +142,24 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--seed", type=int, default=0, help="placement seed (default 0); the same seed gives the same bytes")
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_realset)
+
+    s = sub.add_parser("lookalikes", help="build the real look-alike frame-set: real photos of several instances "
+                                          "per category (docs/lookalike-set.md; offline)",
+                       description="Real photos of 43 CORe50 object instances in 10 categories (CC BY 4.0), one "
+                                   "episode per target instance with its same-category look-alikes, other "
+                                   "categories and empty rooms. 'shot': the photos as frames; 'pasted': each object "
+                                   "cut out and pasted into real office photos (TUM RGB-D).")
+    s.add_argument("out", type=Path, nargs="?", help="frame-set folder to create")
+    s.add_argument("--variant", choices=("shot", "pasted"), default="shot", help="photos as shot (default) or "
+                                                                                  "objects pasted into rooms")
+    s.add_argument("--src", type=Path, help="source folder of photos, masks and rooms (default: the one shipped "
+                                            "with pin_match)")
+    s.add_argument("--prepare-from", nargs=2, type=Path, metavar=("CORE50_REPO", "ROOMS_REPO"),
+                   help="instead of building: write --src from checkouts of giacomobartoli/core50_segmentation "
+                        "and gaoxiang12/slambook2 (automatic GrabCut masks)")
+    s.add_argument("--seed", type=int, default=0, help="seed of frame choices and placements (default 0)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set (or --src) at OUT")
+    s.set_defaults(func=_cmd_lookalikes)
 
     s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
     s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")

@@ -1,6 +1,6 @@
 """A development frame-set of real look-alikes: several real instances per category, real photos of each.
 
-The recolour set (``pin_match.realset``) rewards colour: its look-alikes are the target's own
+The recolour set (``pin_match.data.realset``) rewards colour: its look-alikes are the target's own
 photo recoloured. This set's look-alikes are other physical objects of the same kind, photographed
 on their own, so a default chosen on it is chosen on the problem PIN poses.
 
@@ -27,7 +27,6 @@ same bytes.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import shutil
@@ -39,12 +38,14 @@ import cv2
 import numpy as np
 
 from pin_match import atomic
+from pin_match.data.frameset import FrameSet
+from pin_match.data.realset import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
+from pin_match.data.writer import FrameSetWriter
 from pin_match.errors import PinMatchError
-from pin_match.frameset import FrameSet
-from pin_match.frameset_writer import FrameSetWriter
-from pin_match.realset import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 
 LOOKALIKES_VERSION = 1
+# the CORe50 photos, their masks and the TUM rooms, as prepare_core50 wrote them (licences: NOTICE.md there)
+PACKAGED_SRC = Path(__file__).resolve().with_name("lookalike_src")
 VARIANTS = ("shot", "pasted")
 N_REFERENCE_PHOTOS = 3
 N_OTHER_FRAMES = 4
@@ -323,12 +324,16 @@ def _descriptions(instance_id: str, category: str) -> list[str]:
 
 
 # ------------------------------------------------------------------ build
-def build(src: str | Path, out: str | Path, *, variant: str = "shot", seed: int = 0,
+def build(out: str | Path, src: str | Path | None = None, *, variant: str = "shot", seed: int = 0,
           overwrite: bool = False) -> FrameSet:
-    """Write the look-alike frame-set of ``variant`` (``shot`` or ``pasted``) from source folder ``src``."""
+    """Write the look-alike frame-set of ``variant`` (``shot`` or ``pasted``) from source folder ``src``.
+
+    Without ``src``, the source folder shipped inside the package (``PACKAGED_SRC``) is used,
+    so the set builds on any install, offline.
+    """
     if variant not in VARIANTS:
         raise LookalikeError(f"unknown variant {variant!r}; choose one of {list(VARIANTS)}")
-    src = Path(src)
+    src = Path(src) if src is not None else PACKAGED_SRC
     photos = load_photos(src)
     rooms = _read_csv(src / "rooms.csv", ROOM_COLUMNS)
     room_file = {r["room_id"]: src / r["file"] for r in rooms}
@@ -341,13 +346,7 @@ def build(src: str | Path, out: str | Path, *, variant: str = "shot", seed: int 
         rgb = _read_rgb(src / p.file)
         return rgb, _read_mask(src / p.mask, rgb.shape[:2])
 
-    used = {}
-    for plan in plans:
-        used[plan.target] = plan.reference_photos
-        for kind, pid in plan.frames:
-            if kind in ("lookalike", "other"):
-                inst = by_id[pid].instance_id
-                used.setdefault(inst, ())
+    used = _objects_used(plans, by_id)
     first_photos = {}
     for p in sorted(photos, key=lambda p: p.photo_id):
         first_photos.setdefault(p.instance_id, []).append(p.photo_id)
@@ -373,15 +372,30 @@ def build(src: str | Path, out: str | Path, *, variant: str = "shot", seed: int 
                     image = room_frame(_read_rgb(room_file[item]), rng)
                     writer.add_frame(plan.episode_id, step, image, np.zeros(image.shape[:2], np.uint16), {})
                     continue
-                rgb, mask = image_and_mask(item)
-                if variant == "shot":
-                    image, frame_mask = letterbox(rgb, mask, rng)
-                else:
-                    room = room_frame(_read_rgb(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)
-                    image, frame_mask = paste_into(room, cutout(rgb, mask), rng)
+                image, frame_mask = _object_frame(*image_and_mask(item), variant, room_file, rng)
                 inst = by_id[item].instance_id
                 writer.add_frame(plan.episode_id, step, image, frame_mask, {1: (inst, roles[inst])})
         return writer.close()
+
+
+def _objects_used(plans: Sequence[EpisodePlan], by_id: dict[str, Photo]) -> dict[str, tuple[str, ...]]:
+    """Every instance the episodes show: targets with their reference photos, distractors with none chosen yet."""
+    used: dict[str, tuple[str, ...]] = {}
+    for plan in plans:
+        used[plan.target] = plan.reference_photos
+        for kind, pid in plan.frames:
+            if kind in ("lookalike", "other"):
+                used.setdefault(by_id[pid].instance_id, ())
+    return used
+
+
+def _object_frame(rgb: np.ndarray, mask: np.ndarray, variant: str, room_file: dict[str, Path],
+                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A photo as the frame (``shot``), or its object pasted into a room (``pasted``); with the object's mask."""
+    if variant == "shot":
+        return letterbox(rgb, mask, rng)
+    room = room_frame(_read_rgb(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)
+    return paste_into(room, cutout(rgb, mask), rng)
 
 
 def summary(src: str | Path) -> dict[str, dict[str, int]]:
@@ -391,32 +405,3 @@ def summary(src: str | Path) -> dict[str, dict[str, int]]:
         out.setdefault(p.category, {}).setdefault(p.instance_id, 0)
         out[p.category][p.instance_id] += 1
     return out
-
-
-def main(argv: Sequence[str] | None = None) -> None:
-    """``python -m pin_match.lookalikes prepare|build ...`` (see docs/lookalike-set.md)."""
-    parser = argparse.ArgumentParser(prog="python -m pin_match.lookalikes")
-    sub = parser.add_subparsers(dest="cmd", required=True)
-    p = sub.add_parser("prepare", help="write a source folder from CORe50 sample photos and TUM room photos")
-    p.add_argument("core50_repo", type=Path)
-    p.add_argument("rooms_repo", type=Path)
-    p.add_argument("src", type=Path)
-    p.add_argument("--overwrite", action="store_true")
-    b = sub.add_parser("build", help="build a frame-set from a source folder")
-    b.add_argument("src", type=Path)
-    b.add_argument("out", type=Path)
-    b.add_argument("--variant", choices=VARIANTS, default="shot")
-    b.add_argument("--seed", type=int, default=0)
-    b.add_argument("--overwrite", action="store_true")
-    a = parser.parse_args(argv)
-    try:
-        if a.cmd == "prepare":
-            print(f"wrote {prepare_core50(a.core50_repo, a.rooms_repo, a.src, overwrite=a.overwrite)}")
-        else:
-            print(f"wrote {build(a.src, a.out, variant=a.variant, seed=a.seed, overwrite=a.overwrite)}")
-    except PinMatchError as exc:
-        raise SystemExit(f"error: {exc}") from None
-
-
-if __name__ == "__main__":
-    main()
