@@ -21,6 +21,7 @@ import argparse
 import copy
 import tempfile
 import time
+import warnings
 from collections.abc import Callable
 from pathlib import Path
 
@@ -38,8 +39,10 @@ MAX_AUROC_CHANGE = 0.005
 
 
 def int8_dynamic(trunk: torch.nn.Module) -> torch.nn.Module:
-    return torch.ao.quantization.quantize_dynamic(copy.deepcopy(trunk), {torch.nn.Linear, torch.nn.Conv2d},
-                                                  dtype=torch.qint8)
+    with warnings.catch_warnings():  # torch.ao.quantization announces its move to torchao on every call
+        warnings.simplefilter("ignore", DeprecationWarning)
+        return torch.ao.quantization.quantize_dynamic(copy.deepcopy(trunk), {torch.nn.Linear, torch.nn.Conv2d},
+                                                      dtype=torch.qint8)
 
 
 def compiled(trunk: torch.nn.Module) -> torch.nn.Module:
