@@ -120,13 +120,14 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
         return
     spec = MatcherSpec.of(matcher)
     setup = WorkerSetup(spec, str(root), fs.fingerprint)
-    client.register_plugin(setup, name=setup.name)
     threads = sum(client.nthreads().values()) or 1
     token = _token(chunks, batch_size)
-    futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, group, str(chunks), batch_size,
-                             key=f"pin-match-{matcher.id}-{group[0]}-{len(group)}-{token}"): group
-               for group in task_groups(todo, fs.episodes.set_index("episode_id").target_object_id, threads)}
+    futures: dict = {}
     try:
+        client.register_plugin(setup, name=setup.name)  # raises a worker's setup error, e.g. a missing frame-set
+        futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, group, str(chunks), batch_size,
+                                 key=f"pin-match-{matcher.id}-{group[0]}-{len(group)}-{token}"): group
+                   for group in task_groups(todo, fs.episodes.set_index("episode_id").target_object_id, threads)}
         for future in as_completed(futures):
             try:
                 n = future.result()  # re-raises the task's own error, e.g. MatcherError naming the frames
@@ -138,8 +139,9 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
                                        f"({exc}); the chunks written so far are kept: rerun to resume") from exc
             bar.update(n)
     finally:
-        if client.status == "running":
+        if client.status == "running":  # after a lost scheduler there is nobody to tell
             client.cancel(list(futures))
+            client.unregister_worker_plugin(setup.name)  # workers that join later need not build this run's matcher
 
 
 def task_groups(todo: list[str], targets: Any, threads: int) -> list[list[str]]:
@@ -244,8 +246,8 @@ _FRAMESETS_LOCK = threading.Lock()
 class WorkerSetup(WorkerPlugin):
     """A Dask worker plugin: load the frame-set and build a matcher per worker thread before the first task.
 
-    Registered by the client for each run (a worker that joins later runs it too); its name
-    carries the matcher id and the frame-set, so registering the same run again replaces it.
+    Registered by the client for one run (a worker that joins during the run sets up too) and
+    unregistered at its end; its name carries the matcher id and the frame-set.
     """
 
     def __init__(self, spec: MatcherSpec, root: str, fingerprint: str) -> None:
