@@ -1,80 +1,124 @@
-"""Scoring on a Dask LocalCluster vs in this process: the overhead of 1 worker, the scaling of 2.
+"""Scoring on a Dask LocalCluster vs in this process: fixed cost and per-frame rate of each setup.
 
-Same frames (8 episodes, 256 frames, of the synthetic default frame-set, selected with
-``shard="0/3"``; 4 episodes with ``--quick``), same matcher (``sift``; ``effnet`` instead
-when it is registered), a fresh cache per run, every run from the frame-set's path to the
-finished table. The in-process side runs one matching thread (``workers=1``, frames decoded
-ahead in a second thread), which is what each single-threaded cluster worker does. Cluster
-start-up and importing the matcher's modules happen before the clock (a cluster serves many
-runs). Runs alternate and repeat, so load from other jobs hits every configuration alike;
-the best run of each is compared. Besides wall time, the CPU time of every process involved
-(this one, which also hosts the scheduler and the nannies, plus the workers) is summed: on
-a shared machine it measures the cluster's overhead far more steadily than the clock.
+Runs at 128, 512 and 2,048 frames (procedural 640x360 frames, 32 per episode; 64 and 128
+with ``--quick``), matcher ``effnet`` at its default (``color`` when effnet is not
+registered), each run from the frame-set's path to the finished table in a fresh cache.
+Setups:
+- in-process: ``workers=1`` (one matching thread, frames decoded ahead in a second one),
+  torch using every core;
+- 1 worker: ``connect("local", workers=1)``, one worker process with every core;
+- 1 single-thread worker and 2 single-thread workers (one torch thread each).
+Per setup, wall seconds against frames is fitted with a line: the intercept is the fixed
+cost per run (registering the worker plugin, loading the frame-set, task round trips, the
+assembly), the slope the seconds per frame. Cluster start-up and the first (cold) run, which
+imports the matcher's modules and builds it in each worker, are measured apart: a cluster
+serves many runs. Sizes and setups alternate, so load from other jobs hits all alike.
+
+Targets: 1 worker within 10 % of in-process wall time at 2,048 frames; 2 single-thread workers
+>= 1.7x one single-thread worker (wall at 2,048 frames).
+
+``python -m benchmarks.bench_distributed [--quick]``.
 """
 
 from __future__ import annotations
 
-import statistics
+import os
 import tempfile
 import time
 from pathlib import Path
 
-from benchmarks.framesets import synthetic
+import numpy as np
+
+from benchmarks.framesets import procedural
 from pin_match.contract.registry import create_matcher, list_matchers
-from pin_match.scoring import Shard, score_to_file
+from pin_match.scoring import score_to_file
 from pin_match.scoring.cluster import connect
+
+SIZES = (128, 512, 2048)
+QUICK_SIZES = (64, 128)
+FRAMES_PER_EPISODE = 32
+SETUPS = ("in-process", "1 worker", "1 single-thread worker", "2 single-thread workers")
+
+
+def single_thread_cluster(n_workers: int):
+    """``n_workers`` worker processes of one thread each, torch held to one thread too."""
+    from distributed import Client
+
+    one = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
+    return Client(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
+                  env=one)
+
+
+def start_clients(matcher: str, warm_fs) -> tuple[dict, dict]:
+    """The three clusters, each started and warmed by one cold run; seconds of start-up and of the cold run."""
+    clients, startup = {}, {}
+    cores = os.cpu_count() or 1
+    makers = {"1 worker": lambda: connect("local", workers=1),
+              "1 single-thread worker": lambda: single_thread_cluster(1),
+              "2 single-thread workers": lambda: single_thread_cluster(min(2, cores))}
+    for label, make in makers.items():
+        t0 = time.perf_counter()
+        clients[label] = make()
+        clients[label].wait_for_workers(len(clients[label].nthreads()) or 1)
+        t1 = time.perf_counter()
+        with tempfile.TemporaryDirectory() as tmp:
+            score_to_file(warm_fs.root, matcher, out=tmp, client=clients[label], progress=False)
+        startup[label] = {"start_s": round(t1 - t0, 2), "cold_run_s": round(time.perf_counter() - t1, 2)}
+    return clients, startup
+
+
+def fit(frames: list[int], seconds: list[float]) -> tuple[float, float]:
+    """(intercept s, slope s/frame) of the least-squares line through the runs."""
+    slope, intercept = np.polyfit(np.array(frames, float), np.array(seconds, float), 1)
+    return float(intercept), float(slope)
 
 
 def run(quick: bool = False) -> dict:
-    matcher = "effnet" if "effnet" in list_matchers() else "sift"
-    fs = synthetic(4 if quick else 24, "synth_quick" if quick else "synth_default")
-    shard = None if quick else "0/3"
-    repeats = 2 if quick else 3
-    times: dict[str, list[float]] = {"in-process": [], "cluster, 1 worker": [], "cluster, 2 workers": []}
-    cpu: dict[str, list[float]] = {k: [] for k in times}
-    startup = {}
+    matcher = "effnet" if "effnet" in list_matchers() else "color"
+    sizes = QUICK_SIZES if quick else SIZES
+    framesets = {n: procedural(n, FRAMES_PER_EPISODE) for n in sizes}
+    create_matcher(matcher)
+    seconds: dict[str, dict[int, float]] = {s: {} for s in SETUPS}
     with tempfile.TemporaryDirectory() as tmp:
-        clients = {}
+        clients, startup = start_clients(matcher, framesets[sizes[0]])
         try:
-            for n in (1, 2):
-                t0 = time.perf_counter()
-                clients[n] = connect("local", workers=n)
-                clients[n].wait_for_workers(n)
-                startup[n] = time.perf_counter() - t0
-                clients[n].run(lambda: create_matcher(matcher) and None)  # import its modules, as below here
-            create_matcher(matcher)
-            for r in range(repeats):
-                for label, client in (("in-process", None), ("cluster, 1 worker", clients[1]),
-                                      ("cluster, 2 workers", clients[2])):
-                    out = Path(tmp) / f"{label}-{r}".replace(", ", "_").replace(" ", "_")
-                    c0, t0 = _cpu_s(client), time.perf_counter()
-                    score_to_file(fs.root, matcher, out=out, workers=1, client=client, shard=shard, progress=False)
-                    times[label].append(time.perf_counter() - t0)
-                    cpu[label].append(_cpu_s(client) - c0)
+            with tempfile.TemporaryDirectory() as warm:  # in-process cold run: imports and builds the matcher here
+                score_to_file(framesets[sizes[0]].root, matcher, out=warm, workers=1, progress=False)
+            for n in sizes:
+                for setup in SETUPS:
+                    out = Path(tmp) / f"{setup}-{n}".replace(" ", "_")
+                    t0 = time.perf_counter()
+                    score_to_file(framesets[n].root, matcher, out=out, workers=1, client=clients.get(setup),
+                                  progress=False)
+                    seconds[setup][n] = round(time.perf_counter() - t0, 3)
+                    print(f"  {setup:<24} {n:5d} frames {seconds[setup][n]:8.2f} s", flush=True)
         finally:
             for client in clients.values():
                 client.close()
-    episodes = Shard.parse(shard).select(list(fs.episodes.episode_id)) if shard else list(fs.episodes.episode_id)
-    n = int(fs.frames.episode_id.isin(episodes).sum())
-    best = {k: min(v) for k, v in times.items()}
-    best_cpu = {k: min(v) for k, v in cpu.items()}
-    overhead = best["cluster, 1 worker"] / best["in-process"] - 1
-    cpu_overhead = best_cpu["cluster, 1 worker"] / best_cpu["in-process"] - 1
-    scaling = best["cluster, 1 worker"] / best["cluster, 2 workers"]
-    print(f"{matcher}, {n} frames, {len(episodes)} episodes; best of {repeats} (median), wall and CPU seconds:")
-    for label, ts in times.items():
-        print(f"  {label:<20} wall {best[label]:7.2f} s ({n / best[label]:5.1f} frames/s, median "
-              f"{statistics.median(ts):7.2f}, all {', '.join(f'{t:.2f}' for t in ts)})  "
-              f"CPU {best_cpu[label]:7.2f} s (all {', '.join(f'{t:.2f}' for t in cpu[label])})")
-    print(f"  cluster start-up: 1 worker {startup[1]:.2f} s, 2 workers {startup[2]:.2f} s (apart from the runs)")
-    print(f"  overhead of a 1-worker cluster: wall {100 * overhead:+.1f} %, CPU {100 * cpu_overhead:+.1f} % "
-          f"(target <= 10 %: {'holds' if min(overhead, cpu_overhead) <= 0.10 else 'does not hold'})")
-    print(f"  scaling 2 workers / 1 worker (wall) = x{scaling:.2f}")
-    return dict(matcher=matcher, frames=n, episodes=len(episodes), repeats=repeats, seconds=times, cpu_seconds=cpu,
-                best_s=best, best_cpu_s=best_cpu, startup_s=startup, overhead_1_worker=overhead,
-                cpu_overhead_1_worker=cpu_overhead, scaling_2_over_1=scaling)
+    lines = {s: fit(list(sizes), [seconds[s][n] for n in sizes]) for s in SETUPS}
+    big = sizes[-1]
+    overhead = seconds["1 worker"][big] / seconds["in-process"][big] - 1
+    scaling = seconds["1 single-thread worker"][big] / seconds["2 single-thread workers"][big]
+    print(f"\n{matcher}, {FRAMES_PER_EPISODE} frames per episode; wall seconds = fixed + per-frame x frames:")
+    print(f"{'setup':<24} {'fixed s':>8} {'ms/frame':>9} {'frames/s':>9}  " +
+          "  ".join(f"{n} frames" for n in sizes) + "   start-up s, cold first run s")
+    for setup in SETUPS:
+        intercept, slope = lines[setup]
+        extra = startup.get(setup, {})
+        print(f"{setup:<24} {intercept:8.2f} {1000 * slope:9.1f} {1 / slope:9.2f}  " +
+              "  ".join(f"{seconds[setup][n]:>{len(str(n)) + 7}.2f}" for n in sizes) +
+              (f"   {extra['start_s']:.2f}, {extra['cold_run_s']:.2f}" if extra else ""))
+    print(f"1 worker vs in-process at {big} frames: wall {100 * overhead:+.1f} % "
+          f"(target <= +10 %: {'holds' if overhead <= 0.10 else 'does not hold'})")
+    print(f"2 single-thread workers vs 1 at {big} frames: x{scaling:.2f} "
+          f"(target >= x1.7: {'holds' if scaling >= 1.7 else 'does not hold'})")
+    return dict(matcher=matcher, frames_per_episode=FRAMES_PER_EPISODE, sizes=list(sizes), seconds=seconds,
+                fixed_s={s: round(lines[s][0], 3) for s in SETUPS},
+                per_frame_s={s: round(lines[s][1], 5) for s in SETUPS}, startup=startup,
+                overhead_1_worker_at_largest=round(overhead, 4), scaling_2_over_1_single_thread=round(scaling, 3))
 
 
-def _cpu_s(client) -> float:
-    """CPU seconds so far of this process (client, scheduler, nannies) and of every worker process."""
-    return time.process_time() + (sum(client.run(time.process_time).values()) if client is not None else 0.0)
+if __name__ == "__main__":
+    import sys
+
+    run(quick="--quick" in sys.argv)

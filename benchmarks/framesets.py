@@ -30,7 +30,8 @@ def synthetic(episodes: int, name: str) -> FrameSet:
 
 def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:
     """Many cheap frames (coloured rectangles, one of them the target) for memory and throughput scaling."""
-    root = CACHE / f"procedural_{n_frames}"
+    root = CACHE / (f"procedural_{n_frames}" if frames_per_episode == 100 else
+                    f"procedural_{n_frames}_per{frames_per_episode}")
     if (root / "frameset.json").exists():
         return FrameSet.load(root)
     rng = np.random.default_rng(seed)

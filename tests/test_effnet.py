@@ -95,6 +95,48 @@ def test_global_embedding_finds_the_same_object(matcher, real_frameset):
     assert int((nearest == torch.arange(len(ids))).sum()) >= 10
 
 
+def _unbatched_encode(trunk: torch.nn.Module, images: list[np.ndarray], bb) -> torch.Tensor:
+    """The plain path the fast one must equal: one resize per image, an NCHW network, cells (B, N, C)."""
+    mean, std = torch.tensor(bb.mean).view(1, 3, 1, 1), torch.tensor(bb.std).view(1, 3, 1, 1)
+    x = torch.cat([F.interpolate(torch.from_numpy(np.ascontiguousarray(im[..., :3])).permute(2, 0, 1)[None].float(),
+                                 size=(bb.input_size,) * 2, mode="bicubic", align_corners=False,
+                                 antialias=True).clamp(0, 255) for im in images])
+    with torch.inference_mode():
+        return trunk(((x / 255.0 - mean) / std).contiguous()).flatten(2).transpose(1, 2)
+
+
+@pytest.mark.parametrize("overrides", [{}, {"layer": "head", "img_size": 448}], ids=["default", "head448"])
+def test_lean_path_scores_equal_the_plain_path_on_real_photos(real_frameset, overrides):
+    """Batched resizing, channels-last, cached patch centres: scores, point scores and points of real frames
+    equal a plain per-image NCHW computation within float rounding (1e-5), at the default and at head/448."""
+    import copy
+
+    from pin_match.contract.crops import crop_boxes
+
+    matcher = create_matcher("effnet", **overrides)
+    bb = matcher.backbone
+    trunk = copy.deepcopy(bb.trunk).to(memory_format=torch.contiguous_format)
+    episode = real_frameset.episodes.iloc[0]
+    target = real_frameset.target(episode.target_object_id)
+    matcher.prepare(target)
+    views = [v[..., :3] for v in target.views]
+    alpha = torch.stack([alpha_to_grid(v[..., 3], bb.grid).reshape(-1) for v in target.views])
+    protos = (_unbatched_encode(trunk, views, bb) * alpha[..., None]).sum(1) / alpha.sum(1, keepdim=True)
+    frame_ids = list(real_frameset.frames.frame_id[real_frameset.frames.episode_id == episode.episode_id][:3])
+    images = [real_frameset.image(f) for f in frame_ids]
+    for image, result in zip(images, matcher.match_batch(images)):
+        boxes = crop_boxes(*image.shape[:2], "pin")
+        cells = _unbatched_encode(trunk, [c.take(image) for c in boxes], bb)
+        sims = (F.normalize(cells, dim=-1) @ F.normalize(protos, dim=-1).T).amax(-1)
+        np.testing.assert_allclose(result.point_scores, sims.flatten().numpy(), atol=1e-5)
+        assert result.score == pytest.approx(float(sims.max()), abs=1e-5)
+        per_crop = bb.grid ** 2
+        offsets = np.repeat([[b.x0, b.y0] for b in boxes], per_crop, axis=0)
+        sides = np.repeat([[b.width, b.height] for b in boxes], per_crop, axis=0)
+        cell_xy = np.array([(i % bb.grid, i // bb.grid) for i in range(per_crop)] * len(boxes))
+        np.testing.assert_array_equal(result.points, np.rint((cell_xy + 0.5) * sides / bb.grid) + offsets)
+
+
 @pytest.mark.slow
 def test_recognises_real_objects(real_frameset, tmp_path):
     table = score(real_frameset, "effnet", out=tmp_path, progress=False)

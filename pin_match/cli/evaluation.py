@@ -90,13 +90,16 @@ def _cmd_bench(a: argparse.Namespace) -> None:
 
 
 def _cmd_demo(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.bench import OFFLINE_MATCHERS, demo
+    from pin_match.evaluation.bench import OFFLINE_MATCHERS, Stopwatch, demo
     from pin_match.evaluation.tables import markdown_table
 
-    joint, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, seed=a.seed, workers=a.workers, progress=not a.quiet)
+    watch = Stopwatch()
+    joint, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, seed=a.seed, workers=a.workers, progress=not a.quiet,
+                      watch=watch)
     print("\nPIN detection metrics on the synthetic val split (column 'sigma from': where each sigma came from):\n")
     print(markdown_table(joint))
     print(f"\nreports, plots, thresholds and score tables: {out}")
+    print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")
 
 
 def _table_arguments(s: argparse.ArgumentParser) -> None:

@@ -8,7 +8,9 @@ By default sigma is tuned on the train split and applied to val, never tuned on 
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 import pandas as pd
@@ -34,11 +36,39 @@ class BenchError(PinMatchError, ValueError):
     """A bench cannot choose sigma as asked on this frame-set."""
 
 
+class Stopwatch:
+    """Wall seconds per named step, in the order the steps ran: where a bench or the demo spends its time."""
+
+    def __init__(self) -> None:
+        self.seconds: dict[str, float] = {}
+
+    @contextmanager
+    def step(self, name: str) -> Iterator[None]:
+        start = time.perf_counter()
+        try:
+            yield
+        finally:
+            self.seconds[name] = self.seconds.get(name, 0.0) + time.perf_counter() - start
+
+    def breakdown(self) -> str:
+        """One line per step with its seconds and share of the total, then the total."""
+        total = sum(self.seconds.values())
+        width = max([len(k) for k in self.seconds] + [5])
+        lines = [f"{name:<{width}} {s:7.1f} s {s / total if total else 0.0:6.1%}" for name, s in self.seconds.items()]
+        return "\n".join([*lines, f"{'total':<{width}} {total:7.1f} s"])
+
+
 def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | Path, *,
           objective: str = DEFAULT_OBJECTIVE, sigma_from: str = "train", overrides: dict[str, dict] | None = None,
           batch_size: int = 8, workers: int | None = None, n_boot: int = 1000,
-          progress: bool = True) -> tuple[pd.DataFrame, list[dict]]:
-    """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``."""
+          progress: bool = True, watch: Stopwatch | None = None) -> tuple[pd.DataFrame, list[dict]]:
+    """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``.
+
+    All matchers are scored first (a bar each), then tuned and reported (one bar); ``watch``
+    collects the seconds of each step.
+    """
+    from tqdm import tqdm
+
     for name in matchers:  # an unknown name fails before any matcher runs
         get_matcher_class(name)
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
@@ -48,17 +78,23 @@ def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | P
                          f"pass --sigma-from with one of {splits} (tuning on the reported split {REPORT_SPLIT!r} is "
                          "optimistic), 'default' for each matcher's default sigma, or 'paper' for the paper's")
     out = Path(out)
-    results = []
+    watch = watch or Stopwatch()
+    tables = {}
     for name in matchers:
-        table = score(fs, name, overrides=(overrides or {}).get(name), out=out / "scores", batch_size=batch_size,
-                      workers=workers, progress=progress)
-        choice = _choose(table, fs, sigma_from, objective, out / "thresholds" / f"{name}.json")
-        results.append(report(table, fs, out / "reports" / name, sigma=choice, split=REPORT_SPLIT, n_boot=n_boot))
-    rows = [report_row(r) for r in results]
-    joint = side_by_side(rows)
-    atomic.write_text(out / "table.md", f"{sigma_caption(rows, REPORT_SPLIT)}\n\n{markdown_table(joint)}\n")
-    atomic.write_text(out / "table.tex", latex_table(joint, caption=sigma_caption(rows, REPORT_SPLIT)) + "\n")
-    atomic.write_text(out / "table.csv", joint.to_csv())
+        with watch.step(f"score {name}"):
+            tables[name] = score(fs, name, overrides=(overrides or {}).get(name), out=out / "scores",
+                                 batch_size=batch_size, workers=workers, progress=progress)
+    results = []
+    with watch.step("tune + report"):
+        for name in tqdm(matchers, desc="tune + report", unit="matcher", disable=not progress, dynamic_ncols=True):
+            choice = _choose(tables[name], fs, sigma_from, objective, out / "thresholds" / f"{name}.json")
+            results.append(report(tables[name], fs, out / "reports" / name, sigma=choice, split=REPORT_SPLIT,
+                                  n_boot=n_boot))
+        rows = [report_row(r) for r in results]
+        joint = side_by_side(rows)
+        atomic.write_text(out / "table.md", f"{sigma_caption(rows, REPORT_SPLIT)}\n\n{markdown_table(joint)}\n")
+        atomic.write_text(out / "table.tex", latex_table(joint, caption=sigma_caption(rows, REPORT_SPLIT)) + "\n")
+        atomic.write_text(out / "table.csv", joint.to_csv())
     return joint, results
 
 
@@ -73,15 +109,25 @@ def _choose(table: ScoreTable, fs: FrameSet, sigma_from: str, objective: str, th
 
 
 def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS, *, seed: int = 0,
-         workers: int | None = None, progress: bool = True) -> tuple[pd.DataFrame, Path]:
-    """Generate the default synthetic frame-set if absent, then bench the offline matchers on it."""
+         workers: int | None = None, progress: bool = True,
+         watch: Stopwatch | None = None) -> tuple[pd.DataFrame, Path]:
+    """Generate the default synthetic frame-set if absent, then bench the offline matchers on it.
+
+    The frame-set is loaded (or rendered) once and the same object goes down to scoring and
+    reports; ``watch`` collects the seconds of rendering, each matcher's scoring and the reports.
+    """
     from pin_match.data.synth import generate
 
     for name in matchers:  # an unknown name fails before the frame-set is rendered
         get_matcher_class(name)
     out = Path(out)
+    watch = watch or Stopwatch()
     fs_path = out / "frameset"
-    fs = FrameSet.load(fs_path) if (fs_path / "frameset.json").exists() else \
-        generate(fs_path, seed=seed, workers=workers)
-    joint, _ = bench(fs, matchers, out, workers=workers, progress=progress)
+    if (fs_path / "frameset.json").exists():
+        with watch.step("load frame-set"):
+            fs = FrameSet.load(fs_path)
+    else:
+        with watch.step("render frame-set"):
+            fs = generate(fs_path, seed=seed, workers=workers, progress=progress)
+    joint, _ = bench(fs, matchers, out, workers=workers, progress=progress, watch=watch)
     return joint, out

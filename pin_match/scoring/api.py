@@ -8,7 +8,7 @@ cache, and the final table is the concatenation of the chunks in episode order: 
 same bytes whether the run was interrupted or not.
 
 The episodes run either here (threads decode ahead of the matcher) or, given a Dask
-``client``, as one task each on a cluster (``pin_match.scoring.cluster``); both write the same
+``client``, a few per task on a cluster (``pin_match.scoring.cluster``); both write the same
 chunk files and end in the same ``assemble``, so either path resumes the other's run.
 """
 

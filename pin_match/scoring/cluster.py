@@ -1,11 +1,14 @@
 """Score episodes on a Dask distributed cluster, into the same cache as the local path.
 
-Episodes are the tasks: the scheduler balances them over the workers and, when a worker
-dies, runs its episode again elsewhere. Each worker thread builds the matcher once and
-keeps it prepared for the last target it saw (worker-local state, see ``_WorkerState``);
-a task writes its episode's chunk file atomically into the shared cache, exactly as the
-local path does, and the client assembles the final table with the local code. So a
-cluster run and a local run resume each other, and the table is the same bytes.
+A task is a few consecutive episodes (sorted by target, so one task usually prepares one
+target once), enough to amortise a round trip while leaving several tasks per worker for
+the scheduler to balance; when a worker dies, its task runs again elsewhere and skips the
+episodes whose chunks it already wrote. Before the first task, a worker plugin
+(``WorkerSetup``) loads the frame-set and builds one matcher per worker thread, so the
+tasks find them ready (``_Matchers``); each task writes every episode's chunk file
+atomically into the shared cache, exactly as the local path does, and the client
+assembles the final table with the local code. So a cluster run and a local run resume
+each other, and the table is the same bytes.
 
 Workers must see the frame-set and the cache at the same absolute paths as the client (a
 shared file system) and have the same pin_match, matchers and weights installed; a worker
@@ -16,7 +19,9 @@ from __future__ import annotations
 
 import os
 import threading
+from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -26,6 +31,11 @@ from pin_match.contract.matcher import Matcher, MatcherConfig
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.scoring.episode import score_episode
+
+try:  # Dask is optional: without it this module still imports, and ``connect`` says what to install
+    from distributed.diagnostics.plugin import WorkerPlugin
+except ImportError:
+    WorkerPlugin = object
 
 DEFAULT_TIMEOUT_S = 30.0
 
@@ -83,12 +93,15 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
                                "docs/distributed.md, section Security)") from exc
 
 
+TASKS_PER_WORKER = 4  # tasks queued per worker thread: enough for balancing, few enough to amortise round trips
+
+
 def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path,
                    batch_size: int, bar) -> None:
-    """Score every episode without a chunk file as one task each; returns when all chunks exist.
+    """Score every episode without a chunk file, a few episodes per task; returns when all chunks exist.
 
     The first task error stops the run: the remaining tasks are cancelled (chunks already
-    written stay, so a rerun resumes) and the error is raised here, naming the episode.
+    written stay, so a rerun resumes) and the error is raised here, naming the episodes.
     """
     from concurrent.futures import CancelledError
 
@@ -103,26 +116,47 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
             bar.update(int(frames.get(episode_id, 0)))
         else:
             todo.append(episode_id)
-    # episodes of one target next to each other, so a worker often keeps its prepared target
-    targets = fs.episodes.set_index("episode_id").target_object_id
-    todo.sort(key=lambda e: (str(targets[e]), e))
+    if not todo:
+        return
     spec = MatcherSpec.of(matcher)
-    futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, e, str(chunks / f"{e}.parquet"),
-                             batch_size, key=f"pin-match-{matcher.id}-{e}-{_token(chunks, batch_size)}"): e
-               for e in todo}
+    setup = WorkerSetup(spec, str(root), fs.fingerprint)
+    threads = sum(client.nthreads().values()) or 1
+    token = _token(chunks, batch_size)
+    futures: dict = {}
     try:
+        client.register_plugin(setup, name=setup.name)  # raises a worker's setup error, e.g. a missing frame-set
+        futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, group, str(chunks), batch_size,
+                                 key=f"pin-match-{matcher.id}-{group[0]}-{len(group)}-{token}"): group
+                   for group in task_groups(todo, fs.episodes.set_index("episode_id").target_object_id, threads)}
         for future in as_completed(futures):
             try:
                 n = future.result()  # re-raises the task's own error, e.g. MatcherError naming the frames
             except KilledWorker as exc:
-                raise DistributedError(f"episode {futures[future]!r} killed every worker that ran it; "
+                raise DistributedError(f"episodes {_named(futures[future])} killed every worker that ran them; "
                                        f"out of memory? ({exc})") from exc
             except CancelledError as exc:
-                raise DistributedError(f"episode {futures[future]!r} was cancelled, the scheduler lost? ({exc}); "
-                                       f"the chunks written so far are kept: rerun to resume") from exc
+                raise DistributedError(f"episodes {_named(futures[future])} were cancelled, the scheduler lost? "
+                                       f"({exc}); the chunks written so far are kept: rerun to resume") from exc
             bar.update(n)
     finally:
-        client.cancel(list(futures))
+        if client.status == "running":  # after a lost scheduler there is nobody to tell
+            client.cancel(list(futures))
+            client.unregister_worker_plugin(setup.name)  # workers that join later need not build this run's matcher
+
+
+def task_groups(todo: list[str], targets: Any, threads: int) -> list[list[str]]:
+    """Episodes sorted by (target, id), cut into runs of at most ``ceil(len / (TASKS_PER_WORKER * threads))``.
+
+    Episodes of one target stay next to each other, so a task (and a worker) usually keeps its
+    prepared target; the cap leaves about ``TASKS_PER_WORKER`` tasks per worker thread.
+    """
+    ordered = sorted(todo, key=lambda e: (str(targets[e]), e))
+    size = max(1, -(-len(ordered) // (TASKS_PER_WORKER * max(1, threads))))
+    return [ordered[i:i + size] for i in range(0, len(ordered), size)]
+
+
+def _named(episodes: list[str]) -> str:
+    return ", ".join(repr(e) for e in episodes)
 
 
 def _token(chunks: Path, batch_size: int) -> str:
@@ -131,44 +165,98 @@ def _token(chunks: Path, batch_size: int) -> str:
     return tokenize(str(chunks), batch_size)[:10]
 
 
-def _score_task(root: str, fingerprint: str, spec: MatcherSpec, episode_id: str, chunk: str, batch_size: int) -> int:
-    """On a worker: score one episode into its chunk file (unless it exists); returns the episode's frame count."""
+def _score_task(root: str, fingerprint: str, spec: MatcherSpec, episode_ids: list[str], chunks: str,
+                batch_size: int) -> int:
+    """On a worker: score the episodes into their chunk files (skipping those that exist); returns their frames."""
     import pyarrow.parquet as pq
 
-    path = Path(chunk)
-    if path.exists():  # written meanwhile by another run on the same cache
-        return pq.read_metadata(path).num_rows
-    state = _STATE.for_matcher(spec)
     fs = _frameset(root, fingerprint)
-    rows = score_episode(fs, state.matcher, episode_id, batch_size=batch_size, pool=state.pool, held=state.held)
-    atomic.write_parquet(path, rows)
-    return len(rows)
+    n = 0
+    with _MATCHERS.lease(spec) as state:
+        for episode_id in episode_ids:
+            path = Path(chunks) / f"{episode_id}.parquet"
+            if path.exists():  # written by an earlier try of this task, or by another run on the same cache
+                n += pq.read_metadata(path).num_rows
+                continue
+            rows = score_episode(fs, state.matcher, episode_id, batch_size=batch_size, pool=state.pool,
+                                 held=state.held)
+            atomic.write_parquet(path, rows)
+            n += len(rows)
+    return n
 
 
-class _WorkerState(threading.local):
-    """Per worker thread: the matcher built once, the target it holds, a pool that decodes frames ahead.
+class _Prepared:
+    """One built matcher, the target it holds, and a pool that decodes frames ahead: used by one task at a time,
+    because ``prepare`` changes the matcher."""
 
-    Thread-local because ``prepare`` changes the matcher: two tasks on one worker's threads
-    never share one. A new matcher id (the next run on a long-lived cluster) replaces it.
+    def __init__(self, spec: MatcherSpec) -> None:
+        self.matcher = spec.build()
+        self.held: dict[str, str] = {}
+        self.pool = ThreadPoolExecutor(max_workers=2)
+
+
+class _Matchers:
+    """Per worker process: built matchers of the current run's matcher id, lent to one task at a time.
+
+    The worker plugin fills it before the first task (one per worker thread); a task that finds
+    none free builds one. A new matcher id (the next run on a long-lived cluster) replaces them.
     """
 
     def __init__(self) -> None:
-        self.pool = ThreadPoolExecutor(max_workers=2)
-        self.matcher_id: str | None = None
-        self.matcher: Matcher | None = None
-        self.held: dict[str, str] = {}
+        self._lock = threading.Lock()
+        self._matcher_id: str | None = None
+        self._free: list[_Prepared] = []
 
-    def for_matcher(self, spec: MatcherSpec) -> _WorkerState:
-        if self.matcher_id != spec.matcher_id:
-            self.matcher_id, self.matcher, self.held = None, None, {}
-            self.matcher = spec.build()
-            self.matcher_id = spec.matcher_id
-        return self
+    def fill(self, spec: MatcherSpec, count: int) -> None:
+        with self._lock:
+            self._switch(spec)
+            missing = count - len(self._free)
+        built = [_Prepared(spec) for _ in range(max(0, missing))]
+        self._give_back(spec, built)
+
+    @contextmanager
+    def lease(self, spec: MatcherSpec) -> Iterator[_Prepared]:
+        with self._lock:
+            self._switch(spec)
+            state = self._free.pop() if self._free else None
+        state = state or _Prepared(spec)
+        try:
+            yield state
+        except BaseException:
+            state.held.clear()  # a failed prepare or match may leave the matcher half-prepared
+            raise
+        finally:
+            self._give_back(spec, [state])
+
+    def _switch(self, spec: MatcherSpec) -> None:
+        if self._matcher_id != spec.matcher_id:
+            self._matcher_id, self._free = spec.matcher_id, []
+
+    def _give_back(self, spec: MatcherSpec, states: list[_Prepared]) -> None:
+        with self._lock:
+            if self._matcher_id == spec.matcher_id:
+                self._free.extend(states)
 
 
-_STATE = _WorkerState()
+_MATCHERS = _Matchers()
 _FRAMESETS: dict[str, FrameSet] = {}
 _FRAMESETS_LOCK = threading.Lock()
+
+
+class WorkerSetup(WorkerPlugin):
+    """A Dask worker plugin: load the frame-set and build a matcher per worker thread before the first task.
+
+    Registered by the client for one run (a worker that joins during the run sets up too) and
+    unregistered at its end; its name carries the matcher id and the frame-set.
+    """
+
+    def __init__(self, spec: MatcherSpec, root: str, fingerprint: str) -> None:
+        self.spec, self.root, self.fingerprint = spec, root, fingerprint
+        self.name = f"pin-match-setup-{spec.matcher_id}-{fingerprint}"
+
+    def setup(self, worker: Any) -> None:
+        _frameset(self.root, self.fingerprint)
+        _MATCHERS.fill(self.spec, worker.state.nthreads)
 
 
 def _frameset(root: str, fingerprint: str) -> FrameSet:

@@ -154,12 +154,15 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
 # ------------------------------------------------------------------ entry point
 def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = DEFAULTS["episodes"],
              objects_per_category: int = DEFAULTS["objects_per_category"], workers: int | None = None,
-             frames_per_episode: int = DEFAULTS["frames_per_episode"], overwrite: bool = False) -> FrameSet:
+             frames_per_episode: int = DEFAULTS["frames_per_episode"], overwrite: bool = False,
+             progress: bool = False) -> FrameSet:
     """Write a complete synthetic PIN-like frame-set to ``out`` and return it loaded.
 
     ``workers`` processes (default: all cores) render reference views and episodes; the
-    result is byte-identical for any number of workers.
+    result is byte-identical for any number of workers. ``progress`` shows a bar per stage.
     """
+    from tqdm import tqdm
+
     if episodes < 2:
         raise SynthError(f"episodes must be at least 2 (one train, one val), got {episodes}")
     if frames_per_episode < 1:
@@ -175,7 +178,9 @@ def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = D
         pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
         try:
             imap = pool.imap if pool else map
-            for spec, views in zip(specs, imap(render_object, specs)):
+            rendered = tqdm(imap(render_object, specs), total=len(specs), desc="render objects", unit="object",
+                            disable=not progress, dynamic_ncols=True)
+            for spec, views in zip(specs, rendered):
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions))
             plans = []
             for episode_id, split, scene_id, objs in plan_episodes(specs, seed, episodes):
@@ -185,7 +190,8 @@ def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = D
                                          stable_seed(seed, "episode", episode_id),
                                          tuple(objs), tuple(roles[o.object_id] for o in objs), frames_per_episode,
                                          str(writer.staging)))
-            for records in imap(render_episode, plans):
+            for records in tqdm(imap(render_episode, plans), total=len(plans), desc="render episodes",
+                                unit="episode", disable=not progress, dynamic_ncols=True):
                 for rec in records:
                     writer.add_frame_record(rec)
         finally:

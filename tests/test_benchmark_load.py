@@ -1,0 +1,62 @@
+"""The benchmark runner's quiet-machine rule: load averages recorded, --json refused on a busy machine."""
+
+from __future__ import annotations
+
+import json
+import sys
+import types
+from pathlib import Path
+
+import pytest
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ is a folder of the repository, not installed
+
+from benchmarks import __main__ as runner  # noqa: E402
+from benchmarks.loadavg import busy_figures, refusal  # noqa: E402
+
+
+def test_refusal_names_each_busy_benchmark_and_its_load():
+    loads = {"bench_a": {"before": 0.4, "after": 1.9}, "bench_b": {"before": 2.1, "after": 0.3},
+             "bench_c": {"before": 1.5, "after": 1.5}}
+    assert busy_figures(loads) == {"bench_b": 2.1}  # 1.5 itself is quiet; the load after does not count
+    message = refusal(loads, noisy=False)
+    assert "bench_b (load 2.10)" in message and "bench_a" not in message and "bench_c" not in message
+    assert "--noisy" in message
+    assert refusal(loads, noisy=True) is None
+    assert refusal({"bench_a": {"before": 1.49}}, noisy=False) is None
+
+
+@pytest.fixture
+def fake_runs(monkeypatch):
+    """Two benchmarks that return a figure each, and load averages read in turn from a list."""
+    loads = []
+    monkeypatch.setattr(runner, "load_1min", lambda: loads.pop(0))
+    monkeypatch.setattr(runner, "machine", lambda: {"cpus": 2})
+    monkeypatch.setattr(runner.importlib, "import_module",
+                        lambda name: types.SimpleNamespace(run=lambda quick: {"figure": name}))
+    return loads
+
+
+def test_json_is_refused_after_a_busy_benchmark_and_written_with_noisy(fake_runs, tmp_path, capsys):
+    out = tmp_path / "results.json"
+    args = ["--only", "bench_sweep", "bench_synth", "--json", str(out)]
+    fake_runs[:] = [0.2, 0.2, 0.5, 3.0, 0.4]  # now; sweep before/after; synth before/after
+    assert runner.main(args) == 2
+    assert not out.exists()
+    captured = capsys.readouterr()
+    assert "bench_synth (load 3.00)" in captured.err and "bench_sweep" not in captured.err
+    assert "(load average before: 3.00)" in captured.out
+
+    fake_runs[:] = [0.2, 0.5, 3.0, 0.4]  # --noisy skips the first look
+    assert runner.main([*args, "--noisy"]) == 0
+    written = json.loads(out.read_text())
+    assert written["noisy"] is True
+    assert written["bench_synth"] == {"figure": "benchmarks.bench_synth", "load_1min": {"before": 3.0, "after": 0.4}}
+    assert written["load_1min"]["bench_sweep"] == {"before": 0.2, "after": 0.5}
+
+
+def test_a_quiet_machine_writes_json(fake_runs, tmp_path):
+    out = tmp_path / "results.json"
+    fake_runs[:] = [0.1, 0.1, 0.2]
+    assert runner.main(["--only", "bench_sweep", "--json", str(out)]) == 0
+    assert json.loads(out.read_text())["noisy"] is False
