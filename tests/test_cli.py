@@ -169,7 +169,7 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     real_load = FrameSet.load.__func__
     monkeypatch.setattr(FrameSet, "load", classmethod(lambda cls, path: loads.append(path) or real_load(cls, path)))
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
-                 "--workers", "1", "--quiet"]) == 0
+                 "--no-lookalikes", "--workers", "1", "--quiet"]) == 0
     assert loads == [tmp_path / "demo" / "frameset"]
     out = capsys.readouterr().out
     breakdown = out[out.index("where the time went"):].splitlines()[1:]
@@ -177,3 +177,17 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     assert "score color" in breakdown[1] and "score sift" in breakdown[2]
     seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
     assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s
+
+
+def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
+    import shutil
+
+    shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--lookalike-matcher", "color",
+                 "--workers", "1", "--quiet"]) == 0
+    out = capsys.readouterr().out
+    assert "on the synthetic val split" in out and "real photos: val instances of CORe50 objects" in out
+    real = out[out.index("real photos"):out.index("reports, plots")]
+    assert "AUROC-same" in real and "color@" in real and "n/a" not in real.split("\n| color@")[1].split("\n")[0]
+    assert "build look-alike set" in out and "score color (look-alikes)" in out
+    assert (tmp_path / "demo" / "lookalikes" / "table.md").is_file()

@@ -6,12 +6,12 @@ functions of scored frames, ``sigma`` and ``tuning`` choose the threshold, ``eva
 matchers (and the demo); ``similarity`` is the paper's intra/inter-category analysis.
 """
 
-from pin_match.evaluation.evaluator import EvaluationError, check_frameset, evaluate
+from pin_match.evaluation.evaluator import EvaluationError, check_frameset, evaluate, split_frames, table_subset
 from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import SigmaChoice, SigmaError, load_threshold, resolve_sigma
 from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES, TuningError, tune, write_thresholds
 
 __all__ = ["DEFAULT_OBJECTIVE", "OBJECTIVES", "EvaluationError", "SigmaChoice", "SigmaError", "TuningError",
-           "check_frameset", "evaluate", "load_threshold", "report", "resolve_sigma", "sweep", "tune",
-           "write_thresholds"]
+           "check_frameset", "evaluate", "load_threshold", "report", "resolve_sigma", "split_frames", "sweep",
+           "table_subset", "tune", "write_thresholds"]

@@ -19,7 +19,7 @@ import pandas as pd
 # (metric key, column header, decimals): the paper's four first, then ours
 TABLE_COLUMNS = [("match_pct", "%Match", 2), ("tm_pct", "TM", 2), ("cm_pct", "CM", 2), ("nm_pct", "NM", 2),
                  ("gm_pct", "GM", 2), ("om_pct", "OM", 2), ("target_recall", "Recall", 2),
-                 ("auroc_target", "AUROC", 3), ("first_match_precision", "FM-prec", 2)]
+                 ("auroc_target", "AUROC", 3), ("auroc_same", "AUROC-same", 3), ("first_match_precision", "FM-prec", 2)]
 CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
 SIGMA_FROM = "sigma from"
 
