@@ -1,8 +1,9 @@
 """Scoring on a Dask LocalCluster vs in this process: fixed cost and per-frame rate of each setup.
 
 Runs at 128, 512 and 2,048 frames (procedural 640x360 frames, 32 per episode; 64 and 128
-with ``--quick``), matcher ``effnet`` at its default (``color`` when effnet is not
-registered), each run from the frame-set's path to the finished table in a fresh cache.
+with ``--quick``), matcher ``effnet`` at ``layer=blocks.3 img_size=224`` (its cheapest
+useful config: the less a frame costs, the more the cluster's own overhead shows),
+each run from the frame-set's path to the finished table in a fresh cache.
 Setups:
 - in-process: ``workers=1`` (one matching thread, frames decoded ahead in a second one),
   torch using every core;
@@ -30,7 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from benchmarks.framesets import procedural
-from pin_match.contract.registry import create_matcher, list_matchers
+from pin_match.contract.registry import create_matcher
 from pin_match.scoring import score_to_file
 from pin_match.scoring.cluster import connect
 
@@ -49,7 +50,7 @@ def single_thread_cluster(n_workers: int):
                   env=one)
 
 
-def start_clients(matcher: str, warm_fs) -> tuple[dict, dict]:
+def start_clients(matcher, warm_fs) -> tuple[dict, dict]:
     """The three clusters, each started and warmed by one cold run; seconds of start-up and of the cold run."""
     clients, startup = {}, {}
     cores = os.cpu_count() or 1
@@ -74,10 +75,9 @@ def fit(frames: list[int], seconds: list[float]) -> tuple[float, float]:
 
 
 def run(quick: bool = False) -> dict:
-    matcher = "effnet" if "effnet" in list_matchers() else "color"
+    matcher = create_matcher("effnet", layer="blocks.3", img_size=224)
     sizes = QUICK_SIZES if quick else SIZES
     framesets = {n: procedural(n, FRAMES_PER_EPISODE) for n in sizes}
-    create_matcher(matcher)
     seconds: dict[str, dict[int, float]] = {s: {} for s in SETUPS}
     with tempfile.TemporaryDirectory() as tmp:
         clients, startup = start_clients(matcher, framesets[sizes[0]])
@@ -99,7 +99,7 @@ def run(quick: bool = False) -> dict:
     big = sizes[-1]
     overhead = seconds["1 worker"][big] / seconds["in-process"][big] - 1
     scaling = seconds["1 single-thread worker"][big] / seconds["2 single-thread workers"][big]
-    print(f"\n{matcher}, {FRAMES_PER_EPISODE} frames per episode; wall seconds = fixed + per-frame x frames:")
+    print(f"\n{matcher.id}, {FRAMES_PER_EPISODE} frames per episode; wall seconds = fixed + per-frame x frames:")
     print(f"{'setup':<24} {'fixed s':>8} {'ms/frame':>9} {'frames/s':>9}  " +
           "  ".join(f"{n} frames" for n in sizes) + "   start-up s, cold first run s")
     for setup in SETUPS:
@@ -112,7 +112,7 @@ def run(quick: bool = False) -> dict:
           f"(target <= +10 %: {'holds' if overhead <= 0.10 else 'does not hold'})")
     print(f"2 single-thread workers vs 1 at {big} frames: x{scaling:.2f} "
           f"(target >= x1.7: {'holds' if scaling >= 1.7 else 'does not hold'})")
-    return dict(matcher=matcher, frames_per_episode=FRAMES_PER_EPISODE, sizes=list(sizes), seconds=seconds,
+    return dict(matcher=matcher.id, frames_per_episode=FRAMES_PER_EPISODE, sizes=list(sizes), seconds=seconds,
                 fixed_s={s: round(lines[s][0], 3) for s in SETUPS},
                 per_frame_s={s: round(lines[s][1], 5) for s in SETUPS}, startup=startup,
                 overhead_1_worker_at_largest=round(overhead, 4), scaling_2_over_1_single_thread=round(scaling, 3))
