@@ -1,0 +1,147 @@
+"""``fusion``: a learned linear combination of registered matchers' scores, read from a fusion file.
+
+No one matcher separates an instance from its look-alikes everywhere: part matching, the
+prototype, colour and keypoints each fail on different pairs. A fusion file (written by
+``pin_match.training.fusion.fit_fusion`` from cached score tables of a train split) names
+the component matchers with their configs and ids, a transform per component (``identity``,
+or ``log1p`` for match counts), and the weights of a logistic regression fitted there:
+
+    score = intercept + sum_i coef_i x transform_i(score_i)
+
+i.e. the logit of "this frame shows the target"; it is never thresholded here. The matcher
+id hashes the file's content (and the components' ids), so a refitted file never reads a
+stale cache, and a component whose id changed since the fit (other weights or code
+version) is refused instead of being fed to weights fitted on other scores. Points are those
+of the ``points_from`` component, shifted by (fused score - its score) so the frame score
+stays the max of the point map. With no ``weights=`` the file fitted on the look-alike
+development frame-sets (docs/instance-matchers.md) is used.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from pin_match.contract import (
+    Matcher,
+    MatcherConfig,
+    MatchResult,
+    Modality,
+    Target,
+    WeightsError,
+    WeightsSpec,
+    content_digest,
+    create_matcher,
+    register_matcher,
+    weights_field,
+)
+
+FUSION_FORMAT = "pin-match-fusion"
+FUSION_VERSION = 1
+DEFAULT_FILE = Path(__file__).with_name("fusion_lookalike.json")
+TRANSFORMS = {"identity": lambda s: s, "log1p": lambda s: math.log1p(max(s, 0.0))}
+
+
+@dataclass(frozen=True)
+class FusionWeightsSpec(WeightsSpec):
+    """The fusion file: the user's, else the one fitted on the look-alike frame-sets, shipped beside this module."""
+
+    @property
+    def source(self) -> str:
+        return f"the fusion file {DEFAULT_FILE.name} shipped with pin_match"
+
+    def resolve(self, override: str | None) -> Path:
+        return self.local_path(override) or DEFAULT_FILE
+
+    def available(self, override: str | None = None) -> bool:
+        return Path(override).expanduser().is_file() if override is not None else DEFAULT_FILE.is_file()
+
+    def identity(self, override: str | None) -> dict[str, Any]:
+        path = Path(override).expanduser() if override is not None else DEFAULT_FILE
+        return {"file_sha256": content_digest(str(path.resolve()))} if path.is_file() else {"path": str(path)}
+
+
+def read_fusion(path: Path) -> dict[str, Any]:
+    """The fusion file, checked: every problem is a WeightsError naming the file."""
+    try:
+        spec = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise WeightsError(f"fusion file {path}: cannot read it as JSON ({exc})") from exc
+    if not isinstance(spec, dict) or spec.get("format") != FUSION_FORMAT or spec.get("version") != FUSION_VERSION:
+        raise WeightsError(f"fusion file {path}: not a {FUSION_FORMAT} file of version {FUSION_VERSION}")
+    components = spec.get("components")
+    if not isinstance(components, list) or not components:
+        raise WeightsError(f"fusion file {path}: 'components' must be a non-empty list")
+    for i, c in enumerate(components):
+        if not isinstance(c, dict) or not isinstance(c.get("matcher"), str) or c.get("transform") not in TRANSFORMS \
+                or not isinstance(c.get("coef"), (int, float)) or not math.isfinite(c["coef"]):
+            raise WeightsError(f"fusion file {path}: component {i} needs 'matcher' (a name), 'config', 'id', a finite "
+                               f"'coef' and 'transform' in {sorted(TRANSFORMS)}")
+    if not isinstance(spec.get("intercept"), (int, float)) or not 0 <= spec.get("points_from", -1) < len(components):
+        raise WeightsError(f"fusion file {path}: needs a numeric 'intercept' and 'points_from' indexing a component")
+    return spec
+
+
+def fused_score(spec: dict[str, Any], scores: list[float]) -> float:
+    """intercept + sum coef x transform(score), the rule the fit optimised."""
+    return float(spec["intercept"]) + sum(float(c["coef"]) * TRANSFORMS[c["transform"]](float(s))
+                                          for c, s in zip(spec["components"], scores))
+
+
+@dataclass
+class FusionConfig(MatcherConfig):
+    weights: str | None = weights_field()
+
+
+@register_matcher("fusion")
+class FusionMatcher(Matcher):
+    """Logistic-regression fusion of component matchers' scores, weights from a fusion file (see module doc)."""
+
+    Config = FusionConfig
+    modality = Modality.VISUAL
+    weights_spec = FusionWeightsSpec(license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
+    default_sigma = 0.0  # the logit at probability 1/2 under the fitting's class weights
+    version = 1
+    paper = "pin_match: score fusion fitted on a train split of real look-alikes (issue 21)"
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        super().__init__(cfg)
+        self.path = self.weights_spec.resolve(self.cfg.weights)
+        self.spec = read_fusion(self.path)
+        self.components = [self._component(i, c) for i, c in enumerate(self.spec["components"])]
+        for part in self.components:
+            if part.modality is not Modality.VISUAL:
+                raise WeightsError(f"fusion file {self.path}: component {part.display_name!r} is of the "
+                                   f"{part.modality.value} modality; a visual fusion takes visual components")
+
+    def _component(self, i: int, c: dict[str, Any]) -> Matcher:
+        part = create_matcher(c["matcher"], **dict(c.get("config") or {}))
+        if part.id != c.get("id"):
+            raise WeightsError(f"fusion file {self.path}: component {i} was fitted as {c.get('id')}, but "
+                               f"{c['matcher']} with its recorded config is now {part.id} (other weights or code "
+                               f"version): refit the fusion")
+        return part
+
+    def parts(self) -> dict[str, Matcher]:
+        return {f"{i}:{p.display_name}": p for i, p in enumerate(self.components)}
+
+    def _prepare(self, target: Target) -> None:
+        for part in self.components:
+            part.prepare(target)
+
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        per_part = [part.match_batch(images) for part in self.components]
+        anchor = int(self.spec["points_from"])
+        out = []
+        for k in range(len(images)):
+            results = [r[k] for r in per_part]
+            score = fused_score(self.spec, [r.score for r in results])
+            shown = results[anchor]
+            shift = score - float(shown.score)
+            out.append(MatchResult(score=score, points=shown.points, point_scores=shown.scores_of_points() + shift))
+        return out

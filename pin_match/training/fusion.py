@@ -1,0 +1,123 @@
+"""Fit a ``fusion`` file: logistic regression on component matchers' cached scores of a train split.
+
+The fusion matcher (``matchers/fusion.py``) only applies weights; fitting needs score tables
+and labels, which live above the matchers, so it is here. Each component is scored through
+``pin_match.scoring.score`` with the usual cache (a table already there is read, never
+recomputed). Frames are the positives when the target is visible; the negatives are split
+into same-category look-alike frames and all other frames, and the three classes weigh the
+same in the loss, so the few look-alike frames that matter most are not drowned by empty rooms.
+The file records the components (name, config, id), the frame-set's fingerprint and the
+split, so what a fusion was fitted on is never guessed.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
+from pin_match import atomic
+from pin_match.contract.registry import create_matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.scoring import score
+from pin_match.scoring.cache import DEFAULT_OUT
+from pin_match.training.config import TrainingError
+
+Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform
+
+
+def class_weights(labels: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """(y, sample weight, class counts): target / same-category look-alike / other frames, each class summing to 1."""
+    target = labels.target_visible.to_numpy(bool)
+    same = labels.same_visible.to_numpy(bool) & ~target
+    other = ~target & ~same
+    counts = {"target": int(target.sum()), "same_category": int(same.sum()), "other": int(other.sum())}
+    if not counts["target"] or not (counts["same_category"] + counts["other"]):
+        raise TrainingError(f"fusion fit needs target and non-target frames; the split has {counts}")
+    weights = np.zeros(len(labels))
+    for mask in (target, same, other):
+        if mask.any():
+            weights[mask] = 1.0 / mask.sum()
+    return target.astype(float), weights, counts
+
+
+def logistic_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, iterations: int = 50) -> np.ndarray:
+    """Weighted, L2-penalised logistic regression by Newton steps; returns (intercept, coefs...).
+
+    Features are standardised inside, so the penalty treats a count and a cosine alike; the
+    returned coefficients apply to the raw features.
+    """
+    mean, std = x.mean(0), x.std(0)
+    std[std == 0] = 1.0
+    z = np.c_[np.ones(len(x)), (x - mean) / std]
+    penalty = np.diag([0.0] + [l2] * x.shape[1])
+    beta = np.zeros(z.shape[1])
+    for _ in range(iterations):
+        p = 1.0 / (1.0 + np.exp(-z @ beta))
+        grad = z.T @ (w * (p - y)) + penalty @ beta
+        hess = (z * (w * p * (1 - p))[:, None]).T @ z + penalty
+        step = np.linalg.solve(hess, grad)
+        beta -= step
+        if np.abs(step).max() < 1e-10:
+            break
+    coefs = beta[1:] / std
+    return np.r_[beta[0] - (coefs * mean).sum(), coefs]
+
+
+def component_scores(fs: FrameSet, components: list[Component], split: str, out: str | Path,
+                     progress: bool) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
+    """Labels of the split's frames with one score column per component, and the components' records."""
+    labels = frame_labels(fs)
+    labels = labels[labels.split == split].reset_index(drop=True)
+    records = []
+    for i, (name, overrides, transform) in enumerate(components):
+        if transform not in TRANSFORMS:
+            raise TrainingError(f"fusion component {name}: transform {transform!r}; choose one of {sorted(TRANSFORMS)}")
+        matcher = create_matcher(name, **overrides)
+        table = score(fs, matcher, split=split, out=out, progress=progress)
+        scored = scored_frames(labels, table)
+        labels[f"s{i}"] = labels.frame_id.map(dict(zip(scored.frame_id, scored.score)))
+        records.append(dict(matcher=name, config=resolved_config(matcher), id=matcher.id, transform=transform))
+    missing = labels[[f"s{i}" for i in range(len(components))]].isna().any(axis=1)
+    if missing.any():
+        raise TrainingError(f"fusion fit: frame {labels.frame_id[missing].iloc[0]!r} has no score in some component")
+    return labels, records
+
+
+def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], path: str | Path, *,
+               split: str = "train", out: str | Path = DEFAULT_OUT, l2: float = 1.0, points_from: int = 0,
+               progress: bool = False) -> dict[str, Any]:
+    """Fit the weights on ``split`` of ``frameset`` and write the fusion file to ``path`` (atomically).
+
+    ``components`` are (matcher name, config overrides, transform); ``points_from`` indexes the
+    component whose points the fusion returns (one that always has points, such as a patch matcher).
+    """
+    fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
+    if not 0 <= points_from < len(components):
+        raise TrainingError(f"fusion fit: points_from={points_from} does not index the {len(components)} components")
+    labels, records = component_scores(fs, components, split, out, progress)
+    y, weights, counts = class_weights(labels)
+    x = np.column_stack([[TRANSFORMS[r["transform"]](float(s)) for s in labels[f"s{i}"]]
+                         for i, r in enumerate(records)])
+    beta = logistic_fit(x, y, weights, l2)
+    for record, coef in zip(records, beta[1:]):
+        record["coef"] = float(coef)
+    spec = dict(format=FUSION_FORMAT, version=FUSION_VERSION, intercept=float(beta[0]), components=records,
+                points_from=points_from,
+                fitted_on=dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint, split=split,
+                               frames=len(labels), classes=counts, l2=l2,
+                               objective="weighted logistic regression, target vs rest; target, same-category "
+                                         "look-alike and other frames weigh the same"))
+    atomic.write_json(path, spec)
+    read_fusion(Path(path))  # what was written is what the matcher accepts
+    return spec
+
+
+def resolved_config(matcher) -> dict[str, Any]:
+    """Every config value the matcher's id hashes, defaults included: a later change of a default never
+    changes which component a fusion file names."""
+    return {k: v for k, v in matcher.cfg.hashed_dict().items() if v is not None}
