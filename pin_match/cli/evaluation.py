@@ -168,7 +168,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("demo", help="the whole job on the synthetic default frame-set (generated if absent)")
     s.add_argument("--matcher", action="append",
-                   help="matcher for the synthetic set (repeatable; default color, effnet, xfeat)")
+                   help="matcher for the synthetic set (repeatable; default color, xfeat)")
     s.add_argument("--lookalike-matcher", action="append",
                    help="matcher for the real look-alike set (repeatable; default color, effnet)")
     s.add_argument("--no-lookalikes", action="store_true", help="the synthetic set only")
