@@ -12,6 +12,7 @@ split, so what a fusion was fitted on is never guessed.
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -120,4 +121,4 @@ def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], pat
 def resolved_config(matcher) -> dict[str, Any]:
     """Every config value the matcher's id hashes, defaults included: a later change of a default never
     changes which component a fusion file names."""
-    return {k: v for k, v in matcher.cfg.hashed_dict().items() if v is not None}
+    return json.loads(json.dumps({k: v for k, v in matcher.cfg.hashed_dict().items() if v is not None}))
