@@ -17,6 +17,7 @@ whose matcher id differs from the client's refuses to write.
 
 from __future__ import annotations
 
+import contextlib
 import os
 import threading
 from collections.abc import Iterator
@@ -103,11 +104,6 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
     The first task error stops the run: the remaining tasks are cancelled (chunks already
     written stay, so a rerun resumes) and the error is raised here, naming the episodes.
     """
-    from concurrent.futures import CancelledError
-
-    from distributed import as_completed
-    from distributed.scheduler import KilledWorker
-
     chunks, root = Path(chunks).resolve(), Path(fs.root).resolve()
     frames = fs.frames.episode_id.value_counts()
     todo = []
@@ -128,20 +124,35 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
         futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, group, str(chunks), batch_size,
                                  key=f"pin-match-{matcher.id}-{group[0]}-{len(group)}-{token}"): group
                    for group in task_groups(todo, fs.episodes.set_index("episode_id").target_object_id, threads)}
-        for future in as_completed(futures):
-            try:
-                n = future.result()  # re-raises the task's own error, e.g. MatcherError naming the frames
-            except KilledWorker as exc:
-                raise DistributedError(f"episodes {_named(futures[future])} killed every worker that ran them; "
-                                       f"out of memory? ({exc})") from exc
-            except CancelledError as exc:
-                raise DistributedError(f"episodes {_named(futures[future])} were cancelled, the scheduler lost? "
-                                       f"({exc}); the chunks written so far are kept: rerun to resume") from exc
-            bar.update(n)
+        _collect(futures, bar)
     finally:
         if client.status == "running":  # after a lost scheduler there is nobody to tell
-            client.cancel(list(futures))
-            client.unregister_worker_plugin(setup.name)  # workers that join later need not build this run's matcher
+            with contextlib.suppress(OSError):  # a connection closing right now is the same case
+                client.cancel(list(futures))
+                client.unregister_worker_plugin(setup.name)  # workers that join later need not build this run's matcher
+
+
+def _collect(futures: dict, bar) -> None:
+    """Wait for every task; a lost scheduler or killed workers end the run with one DistributedError."""
+    from concurrent.futures import CancelledError
+
+    from distributed import as_completed
+    from distributed.scheduler import KilledWorker
+
+    group: list[str] = []
+    try:
+        for future in as_completed(futures):
+            group = futures[future]
+            bar.update(future.result())  # re-raises the task's own error, e.g. MatcherError naming the frames
+    except PinMatchError:
+        raise
+    except KilledWorker as exc:
+        raise DistributedError(f"episodes {_named(group)} killed every worker that ran them; out of memory? "
+                               f"({exc})") from exc
+    except (CancelledError, OSError) as exc:  # distributed's CommClosedError is an OSError
+        raise DistributedError(f"the run was cut off at episodes {_named(group)}: the scheduler lost? "
+                               f"({type(exc).__name__}: {exc}); the chunks written so far are kept: rerun to "
+                               "resume") from exc
 
 
 def task_groups(todo: list[str], targets: Any, threads: int) -> list[list[str]]:
