@@ -222,13 +222,14 @@ def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_fram
             process.wait()
     assert isinstance(result.get("error"), DistributedError), result
     assert "the scheduler lost?" in str(result["error"]) and "rerun to resume" in str(result["error"])
-    assert len(first) == 1 and list(out.glob("*/*/chunks/*.parquet")) == first
-    done = first[0].stem
+    # the chunks written before the loss are kept; a worker may still finish the episode it was running
+    kept = {p.stem for p in out.glob("*/*/chunks/*.parquet")}
+    assert len(first) == 1 and first[0].stem in kept
 
     log.unlink(missing_ok=True)
     table = score(tiny_frameset, "test-slow", out=out, **kw)
     episode_targets = dict(zip(tiny_frameset.episodes.episode_id, tiny_frameset.episodes.target_object_id))
-    rest = [target for episode, target in episode_targets.items() if episode != done]
+    rest = [target for episode, target in episode_targets.items() if episode not in kept]
     assert [t for _, t in _prepares(log)] == rest  # only the episode without a chunk was scored again
     reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", progress=False)
     assert table.frames.equals(reference.frames)
