@@ -70,11 +70,13 @@ class _AliasLoader(importlib.abc.Loader):
 
 class _AliasFinder(importlib.abc.MetaPathFinder):
     def find_spec(self, fullname, path=None, target=None):
-        if new_name(fullname) is None:
+        if not fullname.startswith("pin_match.") or new_name(fullname) is None:
             return None
         return importlib.machinery.ModuleSpec(fullname, _AliasLoader())
 
 
 def install() -> None:
     if not any(isinstance(f, _AliasFinder) for f in sys.meta_path):
+        # first: a submodule of a moved package (pin_match.synth.objects) would otherwise be found through its
+        # alias parent's __path__ and loaded a second time under the old name
         sys.meta_path.insert(0, _AliasFinder())
