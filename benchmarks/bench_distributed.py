@@ -33,7 +33,7 @@ import numpy as np
 from benchmarks.framesets import procedural
 from pin_match.contract.registry import create_matcher
 from pin_match.scoring import score_to_file
-from pin_match.scoring.cluster import connect
+from pin_match.scoring.cluster import connect, local_cluster
 
 SIZES = (128, 512, 2048)
 QUICK_SIZES = (64, 128)
@@ -41,22 +41,13 @@ FRAMES_PER_EPISODE = 32
 SETUPS = ("in-process", "1 worker", "1 single-thread worker", "2 single-thread workers")
 
 
-def single_thread_cluster(n_workers: int):
-    """``n_workers`` worker processes of one thread each, torch held to one thread too."""
-    from distributed import Client
-
-    one = {"OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
-    return Client(n_workers=n_workers, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
-                  env=one)
-
-
 def start_clients(matcher, warm_fs) -> tuple[dict, dict]:
     """The three clusters, each started and warmed by one cold run; seconds of start-up and of the cold run."""
     clients, startup = {}, {}
     cores = os.cpu_count() or 1
     makers = {"1 worker": lambda: connect("local", workers=1),
-              "1 single-thread worker": lambda: single_thread_cluster(1),
-              "2 single-thread workers": lambda: single_thread_cluster(min(2, cores))}
+              "1 single-thread worker": lambda: local_cluster(1, torch_threads=1),
+              "2 single-thread workers": lambda: local_cluster(min(2, cores), torch_threads=1)}
     for label, make in makers.items():
         t0 = time.perf_counter()
         clients[label] = make()

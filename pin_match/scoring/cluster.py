@@ -20,6 +20,7 @@ from __future__ import annotations
 import contextlib
 import os
 import threading
+import warnings
 from collections.abc import Iterator
 from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
@@ -79,9 +80,7 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
         raise DistributedError("--scheduler needs Dask distributed: pip install 'pin-match[dask]'") from exc
     if scheduler == "local":
         n = workers or min(2, os.cpu_count() or 1)
-        threads = str(max(1, (os.cpu_count() or 1) // n))  # the processes share this machine's cores
-        return Client(n_workers=n, threads_per_worker=1, processes=True, dashboard_address="127.0.0.1:0",
-                      env={"OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads})
+        return local_cluster(n, torch_threads=max(1, (os.cpu_count() or 1) // n))  # sharing this machine's cores
     where = dict(scheduler_file=scheduler) if scheduler.endswith(".json") and Path(scheduler).is_file() \
         else dict(address=scheduler)
     try:
@@ -92,6 +91,50 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
     except (TypeError, RuntimeError) as exc:
         raise DistributedError(f"Dask refuses to connect to {scheduler!r}: {exc} (Dask's TLS settings: "
                                "docs/distributed.md, section Security)") from exc
+
+
+# glibc reads MALLOC_TRIM_THRESHOLD_ once, when a process starts. Dask's nanny sets it (65536) for every worker
+# so that freed memory goes back to the system; setting it also switches off glibc's adaptive mmap threshold, so
+# every large tensor a torch matcher allocates is a fresh mmap, zeroed page by page: effnet scored 81.2 ms a frame
+# with it against 35.9 without, in one process (docs/performance.md). Workers started here keep glibc's default.
+SLOW_MALLOC_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
+_KEEP_GLIBC_DEFAULT = {f"distributed.nanny.pre-spawn-environ.{SLOW_MALLOC_VARIABLE}": None}
+
+
+def local_cluster(n_workers: int, *, torch_threads: int) -> Any:
+    """A client of ``n_workers`` single-thread worker processes on this machine, each with ``torch_threads``
+    math threads and glibc's default allocator settings; the dashboard listens on 127.0.0.1 only.
+
+    This process's own value of the variable is not passed on either: an earlier Dask cluster started
+    here leaves Dask's value in ``os.environ`` (its nanny writes it there before spawning).
+    """
+    import dask
+    from distributed import Client
+
+    threads = str(torch_threads)
+    inherited = os.environ.pop(SLOW_MALLOC_VARIABLE, None)
+    try:
+        with dask.config.set(_KEEP_GLIBC_DEFAULT):
+            return Client(n_workers=n_workers, threads_per_worker=1, processes=True,
+                          dashboard_address="127.0.0.1:0", env={"OMP_NUM_THREADS": threads, "MKL_NUM_THREADS": threads})
+    finally:
+        if inherited is not None:
+            os.environ[SLOW_MALLOC_VARIABLE] = inherited
+
+
+def warn_slow_malloc(client: Any) -> None:
+    """Warn when workers run with a trim threshold set: the scores are right, but torch matchers run slower."""
+    settings = client.run(_malloc_setting)
+    slow = sorted(address for address, value in settings.items() if value is not None)
+    if slow:
+        warnings.warn(f"{len(slow)} of {len(settings)} Dask workers (e.g. {slow[0]}) run with "
+                      f"{SLOW_MALLOC_VARIABLE}={settings[slow[0]]}, Dask's nanny default, which makes torch "
+                      f"matchers about 2x slower; start them with it unset (docs/distributed.md, section Speed)",
+                      stacklevel=3)
+
+
+def _malloc_setting() -> str | None:
+    return os.environ.get(SLOW_MALLOC_VARIABLE)
 
 
 TASKS_PER_WORKER = 4  # tasks queued per worker thread: enough for balancing, few enough to amortise round trips
@@ -114,6 +157,7 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
             todo.append(episode_id)
     if not todo:
         return
+    warn_slow_malloc(client)
     spec = MatcherSpec.of(matcher)
     setup = WorkerSetup(spec, str(root), fs.fingerprint)
     threads = sum(client.nthreads().values()) or 1
