@@ -16,7 +16,10 @@ imports the matcher's modules and builds it in each worker, are measured apart: 
 serves many runs. Sizes and setups alternate, so load from other jobs hits all alike.
 
 Targets: 1 worker within 10 % of in-process wall time at 2,048 frames; 2 single-thread workers
->= 1.7x one single-thread worker (wall at 2,048 frames).
+>= 1.7x one single-thread worker (wall at 2,048 frames). Beside each wall time, the CPU seconds
+of this process and all its children (the workers, their decode-ahead threads, the scheduler)
+give the cores a setup keeps busy: on a machine of C cores, a setup that keeps k busy with one
+worker can speed up at most C / k with more.
 
 ``python -m benchmarks.bench_distributed [--quick]``.
 """
@@ -59,6 +62,21 @@ def start_clients(matcher, warm_fs) -> tuple[dict, dict]:
     return clients, startup
 
 
+def cpu_seconds() -> float:
+    """User + system CPU seconds of this process and every process under it, so far."""
+    import psutil
+
+    me = psutil.Process()
+    total = 0.0
+    for process in [me, *me.children(recursive=True)]:
+        try:
+            times = process.cpu_times()
+        except psutil.NoSuchProcess:
+            continue
+        total += times.user + times.system
+    return total
+
+
 def fit(frames: list[int], seconds: list[float]) -> tuple[float, float]:
     """(intercept s, slope s/frame) of the least-squares line through the runs."""
     slope, intercept = np.polyfit(np.array(frames, float), np.array(seconds, float), 1)
@@ -70,6 +88,7 @@ def run(quick: bool = False) -> dict:
     sizes = QUICK_SIZES if quick else SIZES
     framesets = {n: procedural(n, FRAMES_PER_EPISODE) for n in sizes}
     seconds: dict[str, dict[int, float]] = {s: {} for s in SETUPS}
+    busy: dict[str, dict[int, float]] = {s: {} for s in SETUPS}  # cores kept busy: CPU seconds / wall seconds
     with tempfile.TemporaryDirectory() as tmp:
         clients, startup = start_clients(matcher, framesets[sizes[0]])
         try:
@@ -78,11 +97,13 @@ def run(quick: bool = False) -> dict:
             for n in sizes:
                 for setup in SETUPS:
                     out = Path(tmp) / f"{setup}-{n}".replace(" ", "_")
-                    t0 = time.perf_counter()
+                    c0, t0 = cpu_seconds(), time.perf_counter()
                     score_to_file(framesets[n].root, matcher, out=out, workers=1, client=clients.get(setup),
                                   progress=False)
-                    seconds[setup][n] = round(time.perf_counter() - t0, 3)
-                    print(f"  {setup:<24} {n:5d} frames {seconds[setup][n]:8.2f} s", flush=True)
+                    wall = time.perf_counter() - t0
+                    seconds[setup][n], busy[setup][n] = round(wall, 3), round((cpu_seconds() - c0) / wall, 2)
+                    print(f"  {setup:<24} {n:5d} frames {seconds[setup][n]:8.2f} s, {busy[setup][n]:.2f} cores busy",
+                          flush=True)
         finally:
             for client in clients.values():
                 client.close()
@@ -92,21 +113,26 @@ def run(quick: bool = False) -> dict:
     scaling = seconds["1 single-thread worker"][big] / seconds["2 single-thread workers"][big]
     print(f"\n{matcher.id}, {FRAMES_PER_EPISODE} frames per episode; wall seconds = fixed + per-frame x frames:")
     print(f"{'setup':<24} {'fixed s':>8} {'ms/frame':>9} {'frames/s':>9}  " +
-          "  ".join(f"{n} frames" for n in sizes) + "   start-up s, cold first run s")
+          "  ".join(f"{n} frames" for n in sizes) + f"  cores busy at {big}   start-up s, cold first run s")
     for setup in SETUPS:
         intercept, slope = lines[setup]
         extra = startup.get(setup, {})
         print(f"{setup:<24} {intercept:8.2f} {1000 * slope:9.1f} {1 / slope:9.2f}  " +
               "  ".join(f"{seconds[setup][n]:>{len(str(n)) + 7}.2f}" for n in sizes) +
+              f"  {busy[setup][big]:>{len(str(big)) + 12}.2f}" +
               (f"   {extra['start_s']:.2f}, {extra['cold_run_s']:.2f}" if extra else ""))
     print(f"1 worker vs in-process at {big} frames: wall {100 * overhead:+.1f} % "
           f"(target <= +10 %: {'holds' if overhead <= 0.10 else 'does not hold'})")
+    ceiling = (os.cpu_count() or 1) / busy["1 single-thread worker"][big]
     print(f"2 single-thread workers vs 1 at {big} frames: x{scaling:.2f} "
-          f"(target >= x1.7: {'holds' if scaling >= 1.7 else 'does not hold'})")
+          f"(target >= x1.7: {'holds' if scaling >= 1.7 else 'does not hold'}); one single-thread worker keeps "
+          f"{busy['1 single-thread worker'][big]:.2f} cores busy, so {os.cpu_count()} cores allow at most "
+          f"x{ceiling:.2f}")
     return dict(matcher=matcher.id, frames_per_episode=FRAMES_PER_EPISODE, sizes=list(sizes), seconds=seconds,
                 fixed_s={s: round(lines[s][0], 3) for s in SETUPS},
-                per_frame_s={s: round(lines[s][1], 5) for s in SETUPS}, startup=startup,
-                overhead_1_worker_at_largest=round(overhead, 4), scaling_2_over_1_single_thread=round(scaling, 3))
+                per_frame_s={s: round(lines[s][1], 5) for s in SETUPS}, cores_busy=busy, startup=startup,
+                overhead_1_worker_at_largest=round(overhead, 4), scaling_2_over_1_single_thread=round(scaling, 3),
+                scaling_ceiling=round(ceiling, 3))
 
 
 if __name__ == "__main__":
