@@ -11,8 +11,8 @@ Dynamic int8 (``torch.ao.quantization.quantize_dynamic``) has kernels for ``nn.L
 RNNs) only, not for ``nn.Conv2d``; EfficientNet's trunk is all convolutions, so the benchmark
 prints how many modules it quantised (0 expected: the variant is then the fp32 network).
 
-``python -m benchmarks.bench_effnet_variants [--quick] [--frameset PATH]``: PATH is the
-frame-set the AUROC is measured on (default: the real-photo set; pass the real look-alike set).
+``python -m benchmarks.bench_effnet_variants [--quick] [--frameset PATH] [--speed-only]``: PATH is
+the frame-set the AUROC is measured on (default: the real-photo set; pass the real look-alike set).
 """
 
 from __future__ import annotations
@@ -99,10 +99,12 @@ def speeds(fs: FrameSet, overrides: dict, n_frames: int, repeats: int) -> dict[s
     return {name: round(n_frames / s, 2) for name, s in best.items()}
 
 
-def run(quick: bool = False, frameset: str | Path | None = None) -> dict:
+def run(quick: bool = False, frameset: str | Path | None = None, auroc: bool = True) -> dict:
+    """``auroc=False`` times the variants only: the AUROC does not depend on the load, the speed does, so the
+    AUROC can be measured apart, beside other jobs, and the speed alone on a quiet machine."""
     speed_fs = real_photos()
     auroc_fs = FrameSet.load(frameset) if frameset else speed_fs
-    out: dict = {"torch_threads": torch.get_num_threads(), "auroc_frameset": str(auroc_fs.root)}
+    out: dict = {"torch_threads": torch.get_num_threads(), "auroc_frameset": str(auroc_fs.root) if auroc else None}
     configs = dict(list(CONFIGS.items())[:1]) if quick else CONFIGS
     for label, overrides in configs.items():
         trunk = create_matcher("effnet", **overrides).backbone.trunk
@@ -111,6 +113,10 @@ def run(quick: bool = False, frameset: str | Path | None = None) -> dict:
         row = out[label] = {"frames_per_s": fps, "int8_dynamic_quantised_modules": n_quantised}
         why = " (no Linear in the trunk, no dynamic int8 Conv2d: it is the fp32 network)" if not n_quantised else ""
         print(f"\neffnet {label}: dynamic int8 quantised {n_quantised} modules{why}")
+        if not auroc:
+            print("  ".join(f"{variant} {fps[variant]:.2f} frames/s ({fps[variant] / fps['fp32']:.2f}x)"
+                            for variant in VARIANTS), flush=True)
+            continue
         print(f"{'variant':<14} {'frames/s':>9} {'speed-up':>9} {'AUROC target':>13} {'change':>8} "
               f"{'AUROC same':>11} {'change':>8}  AUROC moves < {MAX_AUROC_CHANGE}")
         for variant in VARIANTS:
@@ -129,5 +135,6 @@ if __name__ == "__main__":
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--quick", action="store_true")
     p.add_argument("--frameset", help="frame-set for the AUROC change (default: the real-photo set)")
+    p.add_argument("--speed-only", action="store_true", help="time the variants, skip the AUROC")
     args = p.parse_args()
-    run(quick=args.quick, frameset=args.frameset)
+    run(quick=args.quick, frameset=args.frameset, auroc=not args.speed_only)
