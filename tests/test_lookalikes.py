@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+
 import cv2
 import numpy as np
 import pytest
@@ -15,6 +17,7 @@ from pin_match.data.lookalikes import (
     _write_csv,
     build,
     instance_splits,
+    load_photos,
     object_mask,
     plan_episodes,
 )
@@ -80,6 +83,41 @@ def test_plan_episodes_frames_and_references():
         # other-category frames come from the target's split only
         assert all(split[pid.rsplit("_", 1)[0]] == split[target] for k, pid in plan.frames if k == "other")
     assert plans == {p.target: p for p in plan_episodes(photos, ["room1", "room2"])}
+
+
+def test_a_source_can_fix_splits_and_reference_photos():
+    # every mug in train (the hash rule would halve them); one marked reference photo per instance
+    photos = [Photo(f"{i}_{k}", i, "mug", "f", "m", "train", "reference" if k == 0 else "")
+              for i in ("a1", "a2", "a3") for k in range(3)]
+    assert instance_splits(photos) == {"a1": "train", "a2": "train", "a3": "train"}
+    plans = plan_episodes(photos, ["room1"])
+    assert [p.target for p in plans] == ["a1", "a2", "a3"]
+    for plan in plans:
+        assert plan.reference_photos == (f"{plan.target}_0",)  # the marked photo alone, not the first three
+        assert sorted(pid for k, pid in plan.frames if k == "target") == [f"{plan.target}_1", f"{plan.target}_2"]
+        assert len([k for k, _ in plan.frames if k == "lookalike"]) == 4  # two unmarked photos of each look-alike
+        assert not [pid for _, pid in plan.frames if pid.endswith("_0")]  # a marked photo is never a frame
+    mixed = [*photos[:3], Photo("a4_0", "a4", "mug", "f", "m")]
+    with pytest.raises(LookalikeError, match="'a4_0': split ''"):
+        instance_splits(mixed)
+    torn = [*photos[:2], Photo("a1_2", "a1", "mug", "f", "m", "val")]
+    with pytest.raises(LookalikeError, match="instance 'a1'"):
+        instance_splits(torn)
+
+
+def test_optional_columns_are_checked(tmp_path):
+    _source(tmp_path, {"mug1": (200, 30, 30), "mug2": (30, 200, 30)})
+    rows = list(csv.DictReader(open(tmp_path / "photos.csv", encoding="utf-8")))
+    for r in rows:
+        r.update(split="test", use="")
+    _write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, "split", "use"), rows)
+    with pytest.raises(LookalikeError, match=r"photos.csv: photo 'mug1_0' has split 'test'"):
+        load_photos(tmp_path)
+    for r in rows:
+        r.update(split="val", use="ref")
+    _write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, "split", "use"), rows)
+    with pytest.raises(LookalikeError, match="use 'ref'"):
+        load_photos(tmp_path)
 
 
 def _source(root, colours: dict[str, tuple[int, int, int]], per_instance: int = 2) -> None:
@@ -156,7 +194,7 @@ def shipped_pasted(tmp_path_factory):
 
 
 def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_pasted):
-    from pin_match.data.lookalikes import PACKAGED_SRC, load_photos
+    from pin_match.data.lookalikes import PACKAGED_SRC
 
     assert (len(shipped_pasted.objects), len(shipped_pasted.episodes), len(shipped_pasted.frames)) == (43, 26, 289)
     assert set(shipped_pasted.episodes.split) == {"train", "val"}
@@ -164,8 +202,6 @@ def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_past
     assert roles["target"] == 26 and roles["same_category"] == 81
     photos = load_photos(PACKAGED_SRC)
     assert len(photos) == 90 and len({p.instance_id for p in photos}) == 44  # one has no look-alike episode
-    import csv
-
     for table in ("photos.csv", "rooms.csv"):
         rows = list(csv.DictReader(open(PACKAGED_SRC / table, encoding="utf-8")))
         assert rows and all(r["licence"].startswith("CC BY 4.0") and r["source"] for r in rows), table

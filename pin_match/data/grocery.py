@@ -1,0 +1,245 @@
+"""A larger real look-alike source: packaged grocery products photographed in stores.
+
+The Grocery Store Dataset (Klasson, Zhang and Kjellstroem, WACV 2019; MIT licence) holds smartphone
+photos taken in Swedish grocery stores, most with the product held in a hand in front of the shelf,
+and one iconic product image per class on a white background. Its packaged products are PIN's
+look-alike problem at a larger scale than the CORe50 crops the toolkit ships: each fine class is one
+product (one brand, flavour and fat content) and its coarse class holds other real products of the
+same kind, shape and often brand (Juice: 10 products, Milk: 6, Yoghurt: 6, three classes of 2).
+
+``prepare_grocery`` turns a checkout into the source folder ``pin_match.data.lookalikes.build``
+reads (docs/lookalike-set.md):
+
+- a product is an instance, its coarse class the category;
+- its reference is its iconic image alone (``use=reference``), masked from the plain background.
+  Store photos are not used as references: the border-seeded GrabCut mask (``object_mask``) often
+  takes shelf or neighbouring packages and cuts the product, seen on a sample by eye;
+- its frames are ``photos_per_product`` store photos, spread evenly over the dataset's
+  train/val/test folders (neighbouring files are often shots of one moment); their masks come from
+  ``object_mask`` and are rough, so the set measures detection, not localisation;
+- splits by product (``split`` column): a category of 4 or more products is halved as
+  ``instance_splits`` halves one, a smaller category goes whole to one split (so its products keep
+  their look-alikes), the small ones alternating between train and val;
+- empty rooms: the TUM office photos shipped with pin_match.
+
+Fruit and vegetables are left out: their fine classes are varieties lying in piles (five apple
+kinds, four peppers differing in colour alone), not single objects a user could own.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+import shutil
+import subprocess
+import tempfile
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pin_match import atomic
+from pin_match.data.lookalikes import (
+    PACKAGED_SRC,
+    PHOTO_COLUMNS,
+    REFERENCE_USE,
+    ROOM_COLUMNS,
+    LookalikeError,
+    Photo,
+    _read_csv,
+    _read_rgb,
+    _write_csv,
+    instance_splits,
+    object_mask,
+)
+from pin_match.data.realset import stable_seed
+
+GROCERY_SOURCE = "github:marcusklasson/GroceryStoreDataset"
+GROCERY_LICENCE = "MIT (Grocery Store Dataset, Klasson et al. 2019; Copyright (c) 2019 Marcus Klasson; file LICENSE)"
+PRODUCT_GROUP = "Packages"  # the coarse-class folder of packaged products (the others: Fruit, Vegetables)
+PHOTO_FOLDERS = ("train", "val", "test")  # the dataset's own photo splits, all used: the set splits by product
+PHOTOS_PER_PRODUCT = 6
+MIN_PRODUCTS_TO_HALVE = 4  # halving fewer would leave a product without a look-alike in its split
+BACKGROUND_TOLERANCE = 24  # iconic images: a pixel is product when a channel differs this much from the border
+CLASS_COLUMNS = ("Class Name (str)", "Coarse Class Name (str)", "Iconic Image Path (str)")
+OUTPUT_COLUMNS = (*PHOTO_COLUMNS, "split", "use")
+
+
+@dataclass(frozen=True)
+class Product:
+    name: str  # the fine class, e.g. Bravo-Apple-Juice
+    coarse: str  # its coarse class, e.g. Juice
+    iconic: Path  # relative to the checkout
+    photos: tuple[Path, ...]  # store photos, relative to the checkout, in folder order then name
+
+    @property
+    def instance_id(self) -> str:
+        return f"grocery_{self.name.lower()}"
+
+    @property
+    def category(self) -> str:
+        return self.coarse.lower()
+
+
+def plain_background_mask(rgb: np.ndarray, tolerance: int = BACKGROUND_TOLERANCE) -> np.ndarray:
+    """The product on an iconic image (uint8, 255 = product): what differs from the border's colour.
+
+    The largest differing piece is kept and replaced by its convex hull: the packages are
+    boxes and bottles, and their white parts touching the white background would otherwise be
+    bitten out. All zero when nothing differs.
+    """
+    h, w = rgb.shape[:2]
+    border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]]).astype(np.int16)
+    differs = (np.abs(rgb.astype(np.int16) - np.median(border, axis=0)).max(axis=2) > tolerance).astype(np.uint8)
+    out = np.zeros((h, w), np.uint8)
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(differs, connectivity=8)
+    if n > 1:
+        piece = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+        cv2.fillConvexPoly(out, cv2.convexHull(cv2.findNonZero(piece)), 255)
+    return out
+
+
+def read_products(repo: str | Path) -> list[Product]:
+    """The packaged products of a checkout, with their iconic image and store photos."""
+    repo = Path(repo)
+    classes = repo / "dataset" / "classes.csv"
+    if not classes.is_file():
+        raise LookalikeError(f"{repo} is not a Grocery Store Dataset checkout: {classes} is missing")
+    with classes.open(newline="", encoding="utf-8") as f:
+        rows = list(csv.DictReader(f))
+    if not rows or any(c not in rows[0] for c in CLASS_COLUMNS):
+        raise LookalikeError(f"{classes} needs a header with {list(CLASS_COLUMNS)} and at least one row")
+    products = []
+    for r in rows:
+        iconic = Path("dataset", r["Iconic Image Path (str)"].lstrip("/"))
+        folder = Path(*iconic.parent.parts[2:])  # e.g. Packages/Juice/Bravo-Apple-Juice
+        if folder.parts[:1] != (PRODUCT_GROUP,):
+            continue
+        if not (repo / iconic).is_file():
+            raise LookalikeError(f"iconic image of {r['Class Name (str)']} missing: {repo / iconic} "
+                                 f"(named in {classes})")
+        photos = tuple(p.relative_to(repo) for split in PHOTO_FOLDERS
+                       for p in sorted((repo / "dataset" / split / folder).glob("*.jpg")))
+        if not photos:
+            raise LookalikeError(f"no store photo of {r['Class Name (str)']}: "
+                                 f"{repo / 'dataset'}/{{{','.join(PHOTO_FOLDERS)}}}/{folder}/*.jpg is empty")
+        products.append(Product(r["Class Name (str)"], r["Coarse Class Name (str)"], iconic, photos))
+    if not products:
+        raise LookalikeError(f"{classes} lists no {PRODUCT_GROUP} class: nothing to prepare")
+    return products
+
+
+def spread(photos: tuple[Path, ...], n: int) -> list[Path]:
+    """``n`` photos evenly spaced over the list (all of them when there are fewer)."""
+    if len(photos) <= n:
+        return list(photos)
+    return [photos[int(k)] for k in np.round(np.linspace(0, len(photos) - 1, n))]
+
+
+def product_splits(products: list[Product]) -> dict[str, str]:
+    """train / val per product (instance id); see the module docstring for the rule."""
+    by_category: dict[str, list[Product]] = {}
+    for p in products:
+        by_category.setdefault(p.category, []).append(p)
+    halved = [Photo(p.instance_id, p.instance_id, p.category, "", "") for ps in by_category.values()
+              if len(ps) >= MIN_PRODUCTS_TO_HALVE for p in ps]
+    out = instance_splits(halved) if halved else {}
+    small = sorted((c for c, ps in by_category.items() if len(ps) < MIN_PRODUCTS_TO_HALVE),
+                   key=lambda c: (-len(by_category[c]), stable_seed("split", c), c))
+    for k, c in enumerate(small):
+        out.update({p.instance_id: ("train", "val")[k % 2] for p in by_category[c]})
+    return out
+
+
+def _commit(repo: Path) -> str | None:
+    try:
+        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+
+
+def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_product: int = PHOTOS_PER_PRODUCT,
+                    overwrite: bool = False) -> Path:
+    """Write a look-alike source folder from a checkout of marcusklasson/GroceryStoreDataset.
+
+    Everything is written into a temporary folder beside ``out`` and renamed onto it at the
+    end, so a failure leaves no half-written source folder.
+    """
+    repo, out = Path(grocery_repo), Path(out)
+    if photos_per_product < 2:
+        raise LookalikeError(f"photos_per_product must be at least 2, not {photos_per_product}")
+    products = read_products(repo)
+    licence = repo / "LICENSE"
+    if not licence.is_file():
+        raise LookalikeError(f"{licence} is missing: the MIT notice must travel with the photos")
+    if out.exists() and not overwrite:
+        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
+    commit = _commit(repo)
+    source = f"{GROCERY_SOURCE}@{commit}" if commit else GROCERY_SOURCE
+    split = product_splits(products)
+    atomic.ensure_dir(out.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        rows = []
+        for p in products:
+            iconic_id = f"{p.instance_id}_iconic"
+            mask = plain_background_mask(_read_rgb(repo / p.iconic))
+            if not mask.any():
+                raise LookalikeError(f"iconic image {repo / p.iconic} shows nothing on its plain background")
+            rows.append(_photo_row(repo, stage, p, iconic_id, p.iconic, mask, source, split, REFERENCE_USE))
+            for photo in spread(p.photos, photos_per_product):
+                photo_id = f"grocery_{photo.parts[1]}_{photo.stem.lower()}"  # dataset/<folder>/.../<name>.jpg
+                rows.append(_photo_row(repo, stage, p, photo_id, photo, object_mask(_read_rgb(repo / photo)),
+                                       source, split, ""))
+        _write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
+        room_rows = _read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
+        for r in room_rows:
+            atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
+        _write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, products, rows,
+                                                       room_rows))
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+    return out
+
+
+def _photo_row(repo: Path, stage: Path, product: Product, photo_id: str, path: Path, mask: np.ndarray,
+               source: str, split: dict[str, str], use: str) -> dict[str, str]:
+    file, mask_file = f"photos/{photo_id}{path.suffix.lower()}", f"masks/{photo_id}.png"
+    atomic.write_bytes(stage / file, (repo / path).read_bytes())
+    atomic.write_image(stage / mask_file, mask)
+    return dict(photo_id=photo_id, instance_id=product.instance_id, category=product.category, file=file,
+                mask=mask_file, source=source, source_path=path.as_posix(), licence=GROCERY_LICENCE,
+                split=split[product.instance_id], use=use)
+
+
+def _notice(licence_text: str, commit: str | None, products: list[Product], rows: list[dict],
+            room_rows: list[dict]) -> str:
+    n_iconic = sum(r["use"] == REFERENCE_USE for r in rows)
+    room_sources = "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in room_rows}))
+    return f"""# Sources and licences of these photos
+
+- `photos/` ({n_iconic} iconic product images and {len(rows) - n_iconic} store photos of
+  {len(products)} packaged products) and the masks made from them (`masks/`: iconic images by
+  `pin_match.data.grocery.plain_background_mask`, store photos by
+  `pin_match.data.lookalikes.object_mask`): **Grocery Store Dataset**, M. Klasson, C. Zhang and
+  H. Kjellstroem, "A Hierarchical Grocery Store Image Dataset with Visual and Semantic Labels",
+  WACV 2019, https://github.com/marcusklasson/GroceryStoreDataset, commit {commit or 'unknown (not a git checkout)'}.
+  Licence: **MIT**, copied below. Each photo's path in that repository is in `photos.csv`.
+  Changes: file names, masks added.
+- `rooms/` ({len(room_rows)} photos, copied from the look-alike source shipped with pin_match, which
+  re-encoded them as JPEG): {room_sources}; each room's path there is in `rooms.csv`.
+
+## Licence of the Grocery Store Dataset
+
+```
+{licence_text.strip()}
+```
+"""
