@@ -39,6 +39,10 @@ class FeatureMapConfig(CropConfig):
                                                              "stride 32)"})
     img_size: int = field(default=448, metadata={"help": "side of the square every crop is squashed to; a "
                                                          "multiple of 32"})
+    compile: bool = field(default=False, metadata={"help": "torch.compile the network with static shapes: "
+                                                           "faster frames, a compilation of some 15-40 s on the "
+                                                           "first call and on each new batch shape "
+                                                           "(docs/performance.md)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -92,9 +96,14 @@ class FeatureMapMatcher(ReferencePrototypeMatcher):
             path = _checkpoint_in(path, (*TIMM_FILES, Path(self.weights_spec.package_file).name))
         state = read_state(path, who)
         try:
-            return self._cut(state, str(path))
+            backbone = self._cut(state, str(path))
         except (RuntimeError, ValueError, KeyError) as exc:
             raise misfit(who, path, self.architecture, exc) from exc
+        if cfg.compile:
+            # static shapes: a matcher sees few batch shapes (the reference views, a frame's crops); torch's default
+            # turns dynamic at the second, and that compilation was still running after 25 min on 2 CPU cores
+            backbone.trunk = torch.compile(backbone.trunk, dynamic=False)
+        return backbone
 
     def embed_reference(self, view: np.ndarray) -> np.ndarray:
         """The view's prototype: its cells averaged under the alpha mask (all cells for an RGB image).
