@@ -143,6 +143,26 @@ def test_lean_path_scores_equal_the_plain_path_on_real_photos(real_frameset, ove
         np.testing.assert_array_equal(result.points, np.rint((cell_xy + 0.5) * sides / bb.grid) + offsets)
 
 
+@pytest.mark.skipif(shutil.which("g++") is None, reason="torch.compile on a CPU builds C++ kernels with g++")
+def test_compile_option_scores_as_the_eager_network_under_its_own_id(real_frameset):
+    """``compile=True`` compiles the cut network (static shapes) and changes nothing a matcher returns: scores
+    within 1e-4 and the same points on real frames; the config differs, so its cached tables stay apart."""
+    overrides = {"layer": "blocks.3", "img_size": 224}
+    eager, compiled = create_matcher("effnet", **overrides), create_matcher("effnet", **overrides, compile=True)
+    assert compiled.id != eager.id
+    assert isinstance(compiled.backbone.trunk, torch._dynamo.eval_frame.OptimizedModule)
+    assert not isinstance(eager.backbone.trunk, torch._dynamo.eval_frame.OptimizedModule)
+    episode = real_frameset.episodes.iloc[0]
+    target = real_frameset.target(episode.target_object_id)
+    images = [real_frameset.image(f) for f in real_frameset.frames.frame_id[:3]]
+    for m in (eager, compiled):
+        m.prepare(target)
+    for want, got in zip(eager.match_batch(images), compiled.match_batch(images)):
+        assert got.score == pytest.approx(want.score, abs=1e-4)
+        np.testing.assert_allclose(got.point_scores, want.point_scores, atol=1e-4)
+        np.testing.assert_array_equal(got.points, want.points)
+
+
 @pytest.mark.slow
 def test_recognises_real_objects(real_frameset, tmp_path):
     table = score(real_frameset, "effnet", out=tmp_path, progress=False)
