@@ -39,10 +39,10 @@ class FeatureMapConfig(CropConfig):
                                                              "stride 32)"})
     img_size: int = field(default=448, metadata={"help": "side of the square every crop is squashed to; a "
                                                          "multiple of 32"})
-    compile: bool = field(default=False, metadata={"help": "torch.compile the network with static shapes: "
-                                                           "faster frames, a compilation of some 15-40 s on the "
-                                                           "first call and on each new batch shape "
-                                                           "(docs/performance.md)"})
+    # the same scores up to float rounding, as on another device: out of the config hash, like ``device``
+    compile: bool = field(default=False, metadata={
+        "hash": False, "help": "torch.compile the network with static shapes: faster frames, a compilation of "
+                               "some 15-40 s on the first call and on each new batch shape (docs/performance.md)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
