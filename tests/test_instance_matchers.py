@@ -183,3 +183,12 @@ def test_fit_fusion_on_cached_tables(tiny_frameset, tmp_path):
     matcher = create_matcher("fusion", weights=str(out))  # the written file is one the matcher takes
     assert matcher.spec == spec
     assert (tmp_path / "scores").is_dir()  # component tables went through the score cache
+
+
+def test_the_carried_fusion_file_fits_its_components_as_they_are_now():
+    """The default fusion file records each component's id; a change that moves one (a new hashed config field,
+    a version bump) makes ``fusion`` refuse it, so such a change must refit the file: this says so first."""
+    from matchers.fusion import FusionMatcher
+
+    recorded = [c["id"] for c in read_fusion(FusionMatcher.weights_spec.resolve(None))["components"]]
+    assert [part.id for part in create_matcher("fusion").components] == recorded
