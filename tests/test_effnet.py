@@ -144,7 +144,7 @@ def test_lean_path_scores_equal_the_plain_path_on_real_photos(real_frameset, ove
 
 
 @pytest.mark.skipif(shutil.which("g++") is None, reason="torch.compile on a CPU builds C++ kernels with g++")
-def test_compile_option_scores_as_the_eager_network_under_its_own_id(real_frameset):
+def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frameset):
     """``compile=True`` compiles the cut network (static shapes) and changes nothing a matcher returns: scores
     within 1e-4 and the same points on real frames. Like ``device`` it stays out of the config hash: it shares the
     eager matcher's id and cached tables (the carried fusion file's component ids rely on that)."""
