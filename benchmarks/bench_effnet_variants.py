@@ -54,8 +54,8 @@ def quantised_modules(trunk: torch.nn.Module) -> int:
 
 
 def variant_matcher(variant: str, overrides: dict):
-    """An effnet matcher whose network is the variant's: ``compile`` is the matcher's own option; int8 keeps the
-    fp32 matcher's id (score it into its own cache folder)."""
+    """An effnet matcher whose network is the variant's: ``compile`` is the matcher's own option, int8 a swapped
+    network. Both keep the fp32 matcher's id, so each is scored into its own cache folder."""
     if variant == "compile":
         return create_matcher("effnet", **overrides, compile=True)
     matcher = create_matcher("effnet", **overrides)
