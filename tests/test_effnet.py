@@ -150,7 +150,7 @@ def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frame
     eager matcher's id and cached tables (the carried fusion file's component ids rely on that)."""
     overrides = {"layer": "blocks.3", "img_size": 224}
     eager, compiled = create_matcher("effnet", **overrides), create_matcher("effnet", **overrides, compile=True)
-    assert compiled.id == eager.id == create_matcher("effnet", layer="blocks.3", img_size=224).id
+    assert compiled.id == eager.id
     assert isinstance(compiled.backbone.trunk, torch._dynamo.eval_frame.OptimizedModule)
     assert not isinstance(eager.backbone.trunk, torch._dynamo.eval_frame.OptimizedModule)
     episode = real_frameset.episodes.iloc[0]
