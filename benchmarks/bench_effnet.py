@@ -22,9 +22,9 @@ import time
 import torch
 
 from benchmarks.framesets import real_photos
-from matchers.backbones import squash_batch
 from pin_match import create_matcher
 from pin_match.contract.crops import crop_boxes
+from pin_match.matchers.backbones import squash_batch
 from pin_match.scoring import score
 
 CONFIGS = {"default (head, 448 px)": {}, "layer=blocks.3 img_size=224": {"layer": "blocks.3", "img_size": 224}}

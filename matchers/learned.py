@@ -15,7 +15,6 @@ import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
 
-from matchers.patch import ReferencePrototypeMatcher, patch_matcher
 from pin_match.contract import (
     CropConfig,
     MatcherConfig,
@@ -26,6 +25,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.patch import ReferencePrototypeMatcher, patch_matcher
 
 
 @dataclass

@@ -23,7 +23,6 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from matchers.hf_load import load_pretrained
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -37,6 +36,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("google/owlvit-base-patch32", license="Apache-2.0")
 QUERIES = ("descriptions", "category")

@@ -21,15 +21,6 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from matchers.backbones import (
-    OPEN_CLIP_FILES,
-    TIMM_FILES,
-    OpenClipBackbone,
-    PatchBackbone,
-    TextBackbone,
-    TimmBackbone,
-    resolve_checkpoint,
-)
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -45,6 +36,15 @@ from pin_match.contract import (
     misfit,
     register_matcher,
     weights_field,
+)
+from pin_match.matchers.backbones import (
+    OPEN_CLIP_FILES,
+    TIMM_FILES,
+    OpenClipBackbone,
+    PatchBackbone,
+    TextBackbone,
+    TimmBackbone,
+    resolve_checkpoint,
 )
 from pin_match.nn.prototypes import masked_mean
 

@@ -35,7 +35,6 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from matchers.hf_load import load_pretrained
 from pin_match.contract import (
     ConfigError,
     CropConfig,
@@ -47,6 +46,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("facebook/sam-vit-base", license="Apache-2.0")
 PAPER = "Personalize Segment Anything Model with One Shot (Zhang et al., ICLR 2024)"

@@ -1,12 +1,11 @@
 """pin_match: matchers for Personalized Instance-based Navigation, benchmarked offline.
 
 The layers, each a subpackage that imports only those before it: ``contract`` (what a
-matcher is) <- ``nn``, ``data`` <- the plug-ins in ``matchers/`` <- ``scoring`` <-
-``evaluation`` <- ``training``, ``pin_agent`` <- ``cli`` (docs/architecture.md).
+matcher is) <- ``nn``, ``data`` <- the plug-ins in ``pin_match.matchers`` (the top-level
+``matchers/`` folder) <- ``scoring`` <- ``evaluation`` <- ``training``, ``pin_agent`` <- ``cli`` (docs/architecture.md).
 ``import pin_match`` loads the contract only (numpy); ``FrameSet`` (pandas) loads on first use.
 """
 
-from pin_match import _moved
 from pin_match.contract import (
     ConfigError,
     Crop,
@@ -34,7 +33,6 @@ __all__ = [
     "crop_boxes", "list_matchers", "register_matcher",
 ]
 
-_moved.install()
 _LAZY = {"FrameSet": "pin_match.data.frameset", "FrameSetError": "pin_match.data.frameset"}
 
 

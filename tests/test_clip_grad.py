@@ -9,11 +9,11 @@ import torch.nn.functional as F
 from tiny_weights import save_tiny_hf_clip
 
 from conftest import make_view
-from matchers.clip_grad import WEIGHTS, ClipGradMatcher, relevance
 from pin_match.contract.crops import crop_boxes
 from pin_match.contract.matcher import Modality, Target
 from pin_match.contract.registry import create_matcher, get_matcher_class
 from pin_match.contract.weights import WeightsError
+from pin_match.matchers.clip_grad import WEIGHTS, ClipGradMatcher, relevance
 
 
 @pytest.fixture(scope="module")

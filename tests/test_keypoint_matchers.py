@@ -12,7 +12,10 @@ from transformers.models.lightglue.modeling_lightglue import normalize_keypoints
 from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
 
 from conftest import make_view
-from matchers.keypoint import (
+from pin_match.contract import registry
+from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
+from pin_match.contract.registry import create_matcher
+from pin_match.matchers.keypoint import (
     count_verdict,
     gated_count,
     normalize_keypoints,
@@ -21,9 +24,6 @@ from matchers.keypoint import (
     superglue_verdict,
     valid_matches,
 )
-from pin_match.contract import registry
-from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
-from pin_match.contract.registry import create_matcher
 
 
 @pytest.fixture(scope="module")
@@ -248,7 +248,7 @@ def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, 
     m.prepare(target)
     assert len(m._refs) == 6
     detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
-    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (matchers.keypoint.detect)
+    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (keypoint.detect)
     assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, -1)
     assert all(len(k.xy) <= 48 for k, _, _ in m._refs)
     if name == "superglue":
@@ -344,7 +344,7 @@ def corner_keypoints(detector, grays, device, max_keypoints=-1):
     """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
     equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
     9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
-    from matchers.keypoint import Keypoints
+    from pin_match.matchers.keypoint import Keypoints
 
     proj = np.random.default_rng(7).standard_normal((81, 32))
     found = []
@@ -373,7 +373,7 @@ def superglue_peaky_dir(tmp_path_factory):
 @pytest.mark.parametrize("iterations", [20, 3])
 def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, superglue_peaky_dir, target,
                                                                  iterations):
-    import matchers.keypoint as keypoint
+    import pin_match.matchers.keypoint as keypoint
 
     monkeypatch.setattr(keypoint, "detect", corner_keypoints)
     sums = {}
@@ -473,7 +473,7 @@ def lightglue_variant(request, tmp_path_factory):
 
 
 def test_lightglue_pairs_equal_cvg_lightglue_on_the_same_keypoints(monkeypatch, lightglue_variant, target):
-    import matchers.keypoint as keypoint
+    import pin_match.matchers.keypoint as keypoint
 
     variant, weights = lightglue_variant
     monkeypatch.setattr(keypoint, "detect", corner_keypoints)

@@ -7,9 +7,9 @@ import pytest
 from tiny_weights import save_tiny_owl
 
 from conftest import make_view
-from matchers.owl import clip_tokenizer, closest_reference, owl_verdict
 from pin_match.contract.matcher import ConfigError, MatcherError, Modality, Target
 from pin_match.contract.registry import create_matcher
+from pin_match.matchers.owl import clip_tokenizer, closest_reference, owl_verdict
 
 
 @pytest.fixture(scope="module")
@@ -169,7 +169,7 @@ def _no_warning():
 
 
 def test_truncated_prompts_warn_once_per_target(owl_dir, target):
-    from matchers.owl import TruncationWarning
+    from pin_match.matchers.owl import TruncationWarning
 
     m = create_matcher("owl", weights=owl_dir)
     with pytest.warns(TruncationWarning, match=r"target mug_x_long: 1 prompt\(s\) longer than OWL-ViT's 16 tokens"):

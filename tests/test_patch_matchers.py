@@ -10,8 +10,12 @@ import pytest
 import torch
 from tiny_weights import TINY_CLIP, save_tiny_open_clip, save_tiny_timm_vit
 
-from matchers.backbones import PatchFeatures
-from matchers.patch import (
+from pin_match import Modality, Target, create_matcher
+from pin_match.contract.registry import get_matcher_class
+from pin_match.contract.weights import WeightsError
+from pin_match.evaluation.sigma import PAPER_THRESHOLDS
+from pin_match.matchers.backbones import PatchFeatures
+from pin_match.matchers.patch import (
     ClipMatcher,
     ClipTextMatcher,
     DinoMatcher,
@@ -19,10 +23,6 @@ from matchers.patch import (
     alpha_to_grid,
     patch_centres,
 )
-from pin_match import Modality, Target, create_matcher
-from pin_match.contract.registry import get_matcher_class
-from pin_match.contract.weights import WeightsError
-from pin_match.evaluation.sigma import PAPER_THRESHOLDS
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("dino", "dinov2", "clip", "clip-text")

@@ -12,10 +12,10 @@ import torch.nn.functional as F
 from tiny_weights import SAM_PATCH, SAM_SIZE, save_tiny_sam
 
 from conftest import make_view
-from matchers.persam import WEIGHTS, PerSamFMatcher, PerSamMatcher, dice_loss, fit_mask_weights, focal_loss
 from pin_match.contract.matcher import Target
 from pin_match.contract.registry import create_matcher, get_matcher_class
 from pin_match.contract.weights import WeightsError
+from pin_match.matchers.persam import WEIGHTS, PerSamFMatcher, PerSamMatcher, dice_loss, fit_mask_weights, focal_loss
 
 SIZE, PATCH = SAM_SIZE, SAM_PATCH
 

@@ -2,9 +2,13 @@
 
 from __future__ import annotations
 
+import importlib
+import os
 import sys
+import textwrap
 from dataclasses import dataclass
 from importlib.metadata import EntryPoint
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,8 +21,8 @@ from pin_match import (
     create_matcher,
     list_matchers,
     register_matcher,
-    registry,
 )
+from pin_match.contract import registry
 from pin_match.contract.matcher import ConfigError, MatcherError
 from pin_match.contract.registry import UnknownMatcherError, parse_overrides
 
@@ -95,12 +99,48 @@ def test_unknown_matcher_suggests_close_names():
 
 def test_builtins_resolve_without_importing_their_module_first():
     for name in ("sift", "color"):
-        sys.modules.pop("matchers.classic", None)
+        sys.modules.pop("pin_match.matchers.classic", None)
         registry._REGISTRY.pop(name, None)
         assert create_matcher(name).name == name
     assert {"sift", "color", "dino", "dinov2", "clip", "clip-text", "superglue", "owl", "persam"} <= \
         set(list_matchers())
     assert list_matchers("clip*") == sorted(n for n in list_matchers() if n.startswith("clip"))
+
+
+def test_a_new_file_in_matchers_with_the_decorator_is_all_a_built_in_needs():
+    folder = Path(registry.__file__).resolve().parents[2] / "matchers"
+    new = folder / f"_new_builtin_{os.getpid()}.py"
+    new.write_text(textwrap.dedent("""
+        from pin_match.contract import MatchResult, Matcher, register_matcher
+
+        @register_matcher("brand-new")
+        class BrandNew(Matcher):
+            def _prepare(self, target):
+                pass
+
+            def _match_batch(self, images):
+                return [MatchResult(score=0.25) for _ in images]
+    """))
+    registry.modules_registering.cache_clear()
+    try:
+        assert "brand-new" in list_matchers("brand-*")
+        assert f"pin_match.matchers.{new.stem}" not in sys.modules  # listed without importing it
+        assert create_matcher("brand-new").default_sigma == 0.5
+    finally:
+        new.unlink()
+        registry.modules_registering.cache_clear()
+        registry._REGISTRY.pop("brand-new", None)
+        sys.modules.pop(f"pin_match.matchers.{new.stem}", None)
+    assert "brand-new" not in list_matchers()
+
+
+def test_the_listed_built_ins_are_exactly_what_their_modules_register():
+    registered = {}
+    for name, module in registry.builtin_modules().items():
+        importlib.import_module(module)
+        registered[name] = registry._REGISTRY[name].__module__
+    assert registered == registry.builtin_modules()
+    assert {"sift", "color", "effnet", "superglue", "ieve", "xfeat", "fusion", "learned"} <= set(registered)
 
 
 def test_entry_point_matchers_are_found(monkeypatch):

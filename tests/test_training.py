@@ -17,12 +17,12 @@ import torch
 from safetensors.torch import load_file
 
 import pin_match
-from matchers.patch import alpha_to_grid
 from pin_match import create_matcher
 from pin_match.cli import main
 from pin_match.contract.testing import contract_target
 from pin_match.contract.weights import WeightsError
 from pin_match.data.writer import FrameSetWriter
+from pin_match.matchers.patch import alpha_to_grid
 from pin_match.nn.head import ProjectionHead, load_head
 from pin_match.scoring import score
 from pin_match.training import TrainConfig, TrainingError, store_frame_scores, train

@@ -290,10 +290,6 @@ def _extras_problem(r: MatchResult) -> str | None:
     return None
 
 
-# class attributes earlier contracts read and this one ignores, with where the information lives now
-RETIRED_ATTRIBUTES = {"license": "weights_spec = WeightsSpec(..., license=...)", "hub_id": "weights_spec"}
-
-
 def class_problems(cls: type[Matcher]) -> list[str]:
     """What keeps a matcher class from working under this contract, each with its fix (empty when none).
 
@@ -306,9 +302,6 @@ def class_problems(cls: type[Matcher]) -> list[str]:
             problems.append(f"its Config {cls.Config.__name__} must derive from {base.Config.__name__}, which "
                             f"{base.__name__} needs: write `class {cls.Config.__name__}({base.Config.__name__})`")
             break
-    for attr, home in RETIRED_ATTRIBUTES.items():
-        if any(attr in vars(k) for k in cls.__mro__ if k not in (Matcher, object)):
-            problems.append(f"the class attribute `{attr}` is no longer read: declare it as {home}")
     return problems
 
 

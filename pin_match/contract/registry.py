@@ -1,20 +1,26 @@
 """Find matchers by name: built-ins, anything decorated in a loaded module, and entry points.
 
-Built-ins are listed here by module, so a name never fails because its module was not
-imported, and heavy libraries (torch, timm) load only when such a matcher is asked for.
-Third-party packages add matchers through the ``pin_match.matchers`` entry-point group.
+A built-in is found by reading the ``@register_matcher("name")`` decorators in the files of
+the built-in package, without importing them: listing names stays cheap (no torch), and a
+name never fails because its module was not imported yet. Heavy libraries load only when
+such a matcher is asked for. Third-party packages add matchers through the
+``pin_match.matchers`` entry-point group.
 """
 
 from __future__ import annotations
 
+import ast
 import dataclasses
 import difflib
 import fnmatch
+import functools
 import importlib
+import importlib.util
 import types
 import typing
 from collections.abc import Callable
 from importlib.metadata import entry_points
+from pathlib import Path
 from typing import Any
 
 from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, class_problems
@@ -22,34 +28,9 @@ from pin_match.errors import PinMatchError
 
 ENTRY_POINT_GROUP = "pin_match.matchers"
 
-# name -> module that registers it on import
-BUILTINS: dict[str, str] = {
-    "sift": "matchers.classic",
-    "color": "matchers.classic",
-    "dino": "matchers.patch",
-    "dinov2": "matchers.patch",
-    "clip": "matchers.patch",
-    "clip-text": "matchers.patch",
-    "effnet": "matchers.effnet",
-    "effnet-lite1": "matchers.effnet",
-    "effnet-lite2": "matchers.effnet",
-    "mobilenetv2": "matchers.mobilenet",
-    "effnet-parts": "matchers.parts",
-    "parts-cascade": "matchers.cascade",
-    "fusion": "matchers.fusion",
-    "superglue": "matchers.keypoint",
-    "lightglue": "matchers.keypoint",
-    "ieve": "matchers.keypoint",
-    "disk-lightglue": "matchers.glue",
-    "aliked-lightglue": "matchers.glue",
-    "xfeat": "matchers.glue",
-    "clip-grad": "matchers.clip_grad",
-    "owl": "matchers.owl",
-    "owl-image": "matchers.owl",
-    "persam": "matchers.persam",
-    "persam-f": "matchers.persam",
-    "learned": "matchers.learned",
-}
+# the package of the built-in plug-ins (the top-level matchers/ folder); its files are read, not imported, to list
+# their names, so a new file there with @register_matcher is all a built-in needs
+BUILTIN_PACKAGE = "pin_match.matchers"
 
 _REGISTRY: dict[str, type[Matcher]] = {}
 
@@ -83,12 +64,43 @@ def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Ma
     return deco
 
 
+def builtin_modules() -> dict[str, str]:
+    """Registered name -> module of every built-in matcher."""
+    return modules_registering(BUILTIN_PACKAGE)
+
+
+@functools.cache
+def modules_registering(package: str) -> dict[str, str]:
+    """Registered name -> module of every ``@register_matcher("name")`` in the package's own files."""
+    spec = importlib.util.find_spec(package)
+    if spec is None or not spec.submodule_search_locations:
+        return {}
+    found = {}
+    for folder in spec.submodule_search_locations:
+        for path in sorted(Path(folder).glob("*.py")):
+            text = path.read_text(encoding="utf-8")
+            if "register_matcher" in text:
+                found.update(dict.fromkeys(_decorated_names(text, str(path)), f"{package}.{path.stem}"))
+    return found
+
+
+def _decorated_names(source: str, filename: str) -> list[str]:
+    names = []
+    for node in ast.walk(ast.parse(source, filename)):
+        if isinstance(node, ast.ClassDef):
+            for deco in node.decorator_list:
+                if isinstance(deco, ast.Call) and getattr(deco.func, "id", getattr(deco.func, "attr", None)) == \
+                        "register_matcher" and deco.args and isinstance(deco.args[0], ast.Constant):
+                    names.append(deco.args[0].value)
+    return names
+
+
 def _entry_points() -> dict[str, Any]:
     return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
 
 
 def available_names() -> list[str]:
-    return sorted(set(BUILTINS) | set(_REGISTRY) | set(_entry_points()))
+    return sorted(set(builtin_modules()) | set(_REGISTRY) | set(_entry_points()))
 
 
 def list_matchers(pattern: str = "*") -> list[str]:
@@ -98,8 +110,9 @@ def list_matchers(pattern: str = "*") -> list[str]:
 
 def get_matcher_class(name: str) -> type[Matcher]:
     if name not in _REGISTRY:
-        if name in BUILTINS:
-            importlib.import_module(BUILTINS[name])
+        builtins = builtin_modules()
+        if name in builtins:
+            importlib.import_module(builtins[name])
         else:
             ep = _entry_points().get(name)
             if ep is not None:

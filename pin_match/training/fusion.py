@@ -19,11 +19,11 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match import atomic
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match.scoring import score
 from pin_match.scoring.cache import DEFAULT_OUT
 from pin_match.training.config import TrainingError

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 import torch
 
-from matchers.patch import patch_matcher
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
+from pin_match.matchers.patch import patch_matcher
 from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
 from pin_match.scoring.cache import cache_dir
 from pin_match.training.checkpoint import load_state, params, save_state, write_head
