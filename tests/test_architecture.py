@@ -135,21 +135,36 @@ def test_import_pin_match_loads_neither_pandas_nor_torch():
     assert out.stdout.split() == ["False", "False"]
 
 
-# ids taken from the code as it landed before the layered layout (commit c8c8205): a matcher's id hashes its
-# name, version, config and weights, never a module path, so every cached table stays found
-IDS_BEFORE_THE_MOVE = {"sift": "sift@6515d01cf884", "color": "color@f03ae06173d4",
-                       "effnet[layer=blocks.3,img_size=224]": "effnet@d1649a13de4e",
-                       "dino": "dino@650a30aaa20a", "owl": "owl@b4264d9cba9d", "clip-grad": "clip-grad@e400bb64f306"}
+# every built-in's id at its default config, as of the layout of 0.1.0 (effnet also at its earlier default, whose
+# caches predate that layout). An id hashes name, version, config and weights, never a module path, so moving code
+# keeps every cached table found. Only the composites (ieve, parts-cascade, fusion) may change theirs, and only
+# when their config changes shape (docs/architecture.md).
+IDS = {"aliked-lightglue": "aliked-lightglue@b1e6f6ad0914", "clip": "clip@e7b5fe327f2d",
+       "clip-grad": "clip-grad@e400bb64f306", "clip-text": "clip-text@42f0bd222bcf", "color": "color@f03ae06173d4",
+       "dino": "dino@650a30aaa20a", "dinov2": "dinov2@6e1ce2ae4f0f", "disk-lightglue": "disk-lightglue@1280f5648e34",
+       "effnet": "effnet@518b38e32c83", "effnet[layer=blocks.3,img_size=224]": "effnet@d1649a13de4e",
+       "effnet-lite1": "effnet-lite1@1a7fe5082f51", "effnet-lite2": "effnet-lite2@7e5fffff7a56",
+       "effnet-parts": "effnet-parts@af0fab6637b5", "learned": "learned@2268bf1e5001",
+       "lightglue": "lightglue@d3a9e763afe1", "mobilenetv2": "mobilenetv2@7ab6b37f8755", "owl": "owl@b4264d9cba9d",
+       "owl-image": "owl-image@949968ed7099", "persam": "persam@6859f62f7160", "persam-f": "persam-f@cf6e564b8302",
+       "sift": "sift@6515d01cf884", "superglue": "superglue@8c14bc055a54", "xfeat": "xfeat@1fb68fd8a821"}
+COMPOSITES = {"ieve", "parts-cascade", "fusion"}
 
 
-@pytest.mark.parametrize("name", sorted(IDS_BEFORE_THE_MOVE))
-def test_matcher_ids_did_not_change_with_the_move(name):
-    """(effnet's default config changed later; its old default keeps its old id, so its caches stay found.)"""
+@pytest.mark.parametrize("name", sorted(IDS))
+def test_matcher_ids_do_not_change_when_code_moves(name):
     from pin_match.contract import create_matcher, parse_overrides
 
     base, _, cfg = name.partition("[")
     overrides = parse_overrides(cfg.rstrip("]").split(",") if cfg else [])
-    assert create_matcher(base, **overrides).id == IDS_BEFORE_THE_MOVE[name]
+    assert create_matcher(base, **overrides).id == IDS[name]
+
+
+def test_every_built_in_but_the_composites_has_its_id_held():
+    from pin_match.contract.registry import builtin_modules
+
+    held = {n.partition("[")[0] for n in IDS} | COMPOSITES
+    assert set(builtin_modules()) - held <= {"template-mean-color"}
 
 
 def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
@@ -159,12 +174,12 @@ def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
     from pin_match.scoring.cache import find_score_table
     from pin_match.scoring.table import COLUMNS, ScoreTable
 
-    folder = tmp_path / IDS_BEFORE_THE_MOVE["color"] / tiny_frameset.fingerprint  # the old cache_dir rule
+    folder = tmp_path / IDS["color"] / tiny_frameset.fingerprint  # the old cache_dir rule
     frames = tiny_frameset.frames[["frame_id", "episode_id", "step", "split"]].copy()
     frames["score"] = 0.5
     for c in ("crop_scores", "points_x", "points_y", "point_scores"):
         frames[c] = [[] for _ in range(len(frames))]
-    ScoreTable(frames[COLUMNS], dict(matcher="color", matcher_id=IDS_BEFORE_THE_MOVE["color"])).write(
+    ScoreTable(frames[COLUMNS], dict(matcher="color", matcher_id=IDS["color"])).write(
         folder / "scores_all.parquet")
     assert find_score_table(tmp_path, tiny_frameset, "color") == folder / "scores_all.parquet"
     assert len(pd.read_parquet(folder / "scores_all.parquet")) == len(frames)
