@@ -172,7 +172,8 @@ def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
     import pandas as pd
 
     from pin_match.scoring.cache import find_score_table
-    from pin_match.scoring.table import COLUMNS, ScoreTable
+    from pin_match.scoring.schema import COLUMNS
+    from pin_match.scoring.table import ScoreTable
 
     folder = tmp_path / IDS["color"] / tiny_frameset.fingerprint  # the old cache_dir rule
     frames = tiny_frameset.frames[["frame_id", "episode_id", "step", "split"]].copy()

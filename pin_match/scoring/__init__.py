@@ -2,8 +2,9 @@
 
 ``score`` / ``score_to_file`` run episodes here (``local``) or on a Dask cluster
 (``cluster``); both call ``episode.score_episode`` and write the same chunk files, so
-either resumes the other. ``cache`` holds the folder rule, finding and merging tables;
-``table`` the ``ScoreTable`` every later step reads.
+either resumes the other. ``schema`` holds what a table and its chunks contain, the metadata
+encoding and when a chunk counts (a damaged one is scored again); ``cache`` the folder rule,
+finding and merging tables; ``table`` the ``ScoreTable`` every later step reads.
 """
 
 from pin_match.scoring.api import score, score_to_file
@@ -19,9 +20,9 @@ from pin_match.scoring.cache import (
     table_meta,
     table_name,
 )
-from pin_match.scoring.episode import score_episode
+from pin_match.scoring.episode import PreparedMatcher, score_episode
 from pin_match.scoring.table import ScoreTable, ScoreTableError
 
-__all__ = ["DEFAULT_OUT", "ScoreTable", "ScoreTableError", "Shard", "ShardError", "cache_dir", "canonical_order",
-           "find_score_table", "merge", "read_meta", "score", "score_episode", "score_to_file", "table_meta",
-           "table_name"]
+__all__ = ["DEFAULT_OUT", "PreparedMatcher", "ScoreTable", "ScoreTableError", "Shard", "ShardError", "cache_dir",
+           "canonical_order", "find_score_table", "merge", "read_meta", "score", "score_episode", "score_to_file",
+           "table_meta", "table_name"]

@@ -23,6 +23,7 @@ from pin_match.contract.registry import create_matcher, with_weights
 from pin_match.data.frameset import FrameSet
 from pin_match.scoring.cache import DEFAULT_OUT, Shard, assemble, cache_dir, read_meta, table_meta, table_name
 from pin_match.scoring.local import score_here
+from pin_match.scoring.schema import chunk_path
 from pin_match.scoring.table import ScoreTable
 
 
@@ -65,7 +66,7 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
             score_episodes(client, part, matcher, episode_ids, chunks, batch_size, bar)
         else:
             score_here(part, matcher, episode_ids, chunks, batch_size, workers or min(2, os.cpu_count() or 1), bar)
-    assemble(final, [chunks / f"{e}.parquet" for e in sorted(episode_ids)], meta)
+    assemble(final, [chunk_path(chunks, e) for e in sorted(episode_ids)], meta)
     return final
 
 

@@ -8,11 +8,9 @@ table, and a table stays found when code moves.
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 import pin_match
@@ -21,7 +19,8 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.table import COLUMNS, META_KEY, ScoreTable, ScoreTableError, table_in
+from pin_match.scoring.schema import COLUMNS, arrow_schema, as_stored, decode_meta
+from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 DEFAULT_OUT = outputs.SCORES
 
@@ -68,42 +67,33 @@ def read_meta(path: Path) -> dict | None:
     import pyarrow.parquet as pq
 
     try:
-        raw = (pq.read_schema(path).metadata or {}).get(META_KEY)
+        metadata = pq.read_schema(path).metadata
     except Exception:  # a damaged file is simply not a cache hit
         return None
-    return json.loads(raw) if raw else None
+    return decode_meta(metadata)
 
 
 def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
-    """The metadata a table carries, as it reads back from JSON (so a cached table compares equal)."""
+    """The metadata a table carries, as it reads back (so a cached table compares equal)."""
     meta = dict(matcher=matcher.display_name, matcher_id=matcher.id, config_hash=matcher.config_hash,
                 config=matcher.cfg.hashed_dict(), frameset_fingerprint=fs.fingerprint,
                 frameset_name=fs.manifest.get("name", ""), split=split or "all",
                 shard=str(shard) if shard else None, default_sigma=matcher.default_sigma,
                 modality=matcher.modality.value, pin_match_version=pin_match.__version__)
-    return json.loads(json.dumps(meta, default=str))
+    return as_stored(meta)
 
 
 def assemble(final: Path, chunk_files: list[Path], meta: dict) -> None:
-    """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata."""
-    import pyarrow as pa
+    """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata.
+
+    The chunks have passed ``schema.chunk_rows`` (or were just written), so they hold the table's types.
+    """
     import pyarrow.parquet as pq
 
-    schema = pa.Schema.from_pandas(_empty_rows(), preserve_index=False)
-    if chunk_files:
-        schema = pq.read_schema(chunk_files[0]).remove_metadata()
-    schema = schema.with_metadata({META_KEY: json.dumps(meta, sort_keys=True, default=str).encode()})
+    schema = arrow_schema(meta)
     with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
         for path in chunk_files:
-            writer.write_table(pq.read_table(path).select(COLUMNS).replace_schema_metadata(schema.metadata))
-
-
-def _empty_rows() -> pd.DataFrame:
-    """The table's columns with their types, for a part with no episodes."""
-    lists = {c: pd.Series([], dtype=object) for c in ("crop_scores", "points_x", "points_y", "point_scores")}
-    return pd.DataFrame({"frame_id": pd.Series([], dtype=object), "episode_id": pd.Series([], dtype=object),
-                         "step": pd.Series([], dtype=np.int64), "split": pd.Series([], dtype=object),
-                         "score": pd.Series([], dtype=np.float64), **lists})[COLUMNS]
+            writer.write_table(pq.read_table(path).replace_schema_metadata(schema.metadata))
 
 
 def canonical_order(frames: pd.DataFrame) -> pd.DataFrame:

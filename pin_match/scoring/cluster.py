@@ -22,17 +22,16 @@ import os
 import threading
 import warnings
 from collections.abc import Iterator
-from concurrent.futures import ThreadPoolExecutor
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from pin_match import atomic
 from pin_match.contract.matcher import Matcher, MatcherConfig
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.episode import score_episode
+from pin_match.scoring.episode import PreparedMatcher, score_into_chunk
+from pin_match.scoring.schema import chunk_rows
 
 try:  # Dask is optional: without it this module still imports, and ``connect`` says what to install
     from distributed.diagnostics.plugin import WorkerPlugin
@@ -93,10 +92,10 @@ def connect(scheduler: str, *, workers: int | None = None, timeout: float = DEFA
                                "docs/distributed.md, section Security)") from exc
 
 
-# glibc reads MALLOC_TRIM_THRESHOLD_ once, when a process starts. Dask's nanny sets it (65536) for every worker
-# so that freed memory goes back to the system; setting it also switches off glibc's adaptive mmap threshold, so
-# every large tensor a torch matcher allocates is a fresh mmap, zeroed page by page: effnet scored 81.2 ms a frame
-# with it against 35.9 without, in one process (docs/performance.md). Workers started here keep glibc's default.
+# glibc reads MALLOC_TRIM_THRESHOLD_ once, when a process starts. Dask's nanny sets it for every worker so that
+# freed memory goes back to the system; setting it also switches off glibc's adaptive mmap threshold, so every large
+# tensor a torch matcher allocates is a fresh mmap, zeroed page by page, which slows torch matchers down
+# (measured in docs/performance.md, section "Dask distributed scoring"). Workers started here keep glibc's default.
 SLOW_MALLOC_VARIABLE = "MALLOC_TRIM_THRESHOLD_"
 _KEEP_GLIBC_DEFAULT = {f"distributed.nanny.pre-spawn-environ.{SLOW_MALLOC_VARIABLE}": None}
 
@@ -148,13 +147,13 @@ def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: lis
     written stay, so a rerun resumes) and the error is raised here, naming the episodes.
     """
     chunks, root = Path(chunks).resolve(), Path(fs.root).resolve()
-    frames = fs.frames.episode_id.value_counts()
     todo = []
     for episode_id in episode_ids:
-        if (chunks / f"{episode_id}.parquet").exists():
-            bar.update(int(frames.get(episode_id, 0)))
-        else:
+        done = chunk_rows(chunks, episode_id)
+        if done is None:
             todo.append(episode_id)
+        else:
+            bar.update(done)
     if not todo:
         return
     warn_slow_malloc(client)
@@ -222,32 +221,15 @@ def _token(chunks: Path, batch_size: int) -> str:
 
 def _score_task(root: str, fingerprint: str, spec: MatcherSpec, episode_ids: list[str], chunks: str,
                 batch_size: int) -> int:
-    """On a worker: score the episodes into their chunk files (skipping those that exist); returns their frames."""
-    import pyarrow.parquet as pq
+    """On a worker: score the episodes into their chunk files; returns their frames.
 
+    A sound chunk found is kept: written by an earlier try of this task, or by another run on the
+    same cache. A damaged one was named by the client when it submitted the task, so not again here.
+    """
     fs = _frameset(root, fingerprint)
-    n = 0
-    with _MATCHERS.lease(spec) as state:
-        for episode_id in episode_ids:
-            path = Path(chunks) / f"{episode_id}.parquet"
-            if path.exists():  # written by an earlier try of this task, or by another run on the same cache
-                n += pq.read_metadata(path).num_rows
-                continue
-            rows = score_episode(fs, state.matcher, episode_id, batch_size=batch_size, pool=state.pool,
-                                 held=state.held)
-            atomic.write_parquet(path, rows)
-            n += len(rows)
-    return n
-
-
-class _Prepared:
-    """One built matcher, the target it holds, and a pool that decodes frames ahead: used by one task at a time,
-    because ``prepare`` changes the matcher."""
-
-    def __init__(self, spec: MatcherSpec) -> None:
-        self.matcher = spec.build()
-        self.held: dict[str, str] = {}
-        self.pool = ThreadPoolExecutor(max_workers=2)
+    with _MATCHERS.lease(spec) as prepared:
+        return sum(score_into_chunk(fs, prepared, Path(chunks), episode_id, batch_size=batch_size, say_why=False)
+                   for episode_id in episode_ids)
 
 
 class _Matchers:
@@ -260,37 +242,37 @@ class _Matchers:
     def __init__(self) -> None:
         self._lock = threading.Lock()
         self._matcher_id: str | None = None
-        self._free: list[_Prepared] = []
+        self._free: list[PreparedMatcher] = []
 
     def fill(self, spec: MatcherSpec, count: int) -> None:
         with self._lock:
             self._switch(spec)
             missing = count - len(self._free)
-        built = [_Prepared(spec) for _ in range(max(0, missing))]
+        built = [PreparedMatcher(spec.build()) for _ in range(max(0, missing))]
         self._give_back(spec, built)
 
     @contextmanager
-    def lease(self, spec: MatcherSpec) -> Iterator[_Prepared]:
+    def lease(self, spec: MatcherSpec) -> Iterator[PreparedMatcher]:
         with self._lock:
             self._switch(spec)
-            state = self._free.pop() if self._free else None
-        state = state or _Prepared(spec)
+            prepared = self._free.pop() if self._free else None
+        prepared = prepared or PreparedMatcher(spec.build())
         try:
-            yield state
+            yield prepared
         except BaseException:
-            state.held.clear()  # a failed prepare or match may leave the matcher half-prepared
+            prepared.forget()
             raise
         finally:
-            self._give_back(spec, [state])
+            self._give_back(spec, [prepared])
 
     def _switch(self, spec: MatcherSpec) -> None:
         if self._matcher_id != spec.matcher_id:
             self._matcher_id, self._free = spec.matcher_id, []
 
-    def _give_back(self, spec: MatcherSpec, states: list[_Prepared]) -> None:
+    def _give_back(self, spec: MatcherSpec, prepared: list[PreparedMatcher]) -> None:
         with self._lock:
             if self._matcher_id == spec.matcher_id:
-                self._free.extend(states)
+                self._free.extend(prepared)
 
 
 _MATCHERS = _Matchers()

@@ -1,7 +1,7 @@
 """Score episodes in this process, taking turns with other processes on the same cache through lock files.
 
 Each episode's rows land in their own chunk file, written atomically, so a killed run
-resumes where it stopped and two processes can share one cache.
+resumes where it stopped (a damaged chunk is scored again) and two processes can share one cache.
 """
 
 from __future__ import annotations
@@ -9,38 +9,32 @@ from __future__ import annotations
 import errno
 import os
 import time
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 from pin_match import atomic
 from pin_match.contract.matcher import Matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.episode import score_episode
+from pin_match.scoring.episode import PreparedMatcher, score_into_chunk
 
 LOCK_STALE_S = 600.0
 LOCK_EMPTY_S = 5.0  # a lock still without a pid after this long was left by a process killed while taking it
 
 
 def score_here(part: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path, batch_size: int,
-                workers: int, bar) -> None:
-    """Score the episodes without a chunk in this process, taking turns with other processes through lock files."""
-    held: dict[str, str] = {}
-    with ThreadPoolExecutor(max_workers=max(2, workers)) as pool:
+               workers: int, bar) -> None:
+    """Score the episodes without a sound chunk in this process, taking turns with other processes through lock
+    files; the chunk is looked at under the lock, so an episode another process just finished is not scored again."""
+    with PreparedMatcher(matcher, workers) as prepared:
         pending = list(episode_ids)
         while pending:
             deferred = []
             for episode_id in pending:
-                if (chunks / f"{episode_id}.parquet").exists():
-                    bar.update(int((part.frames.episode_id == episode_id).sum()))
-                    continue
                 lock = _try_lock(chunks / f"{episode_id}.lock")
                 if lock is None:  # another process is scoring it right now
                     deferred.append(episode_id)
                     continue
                 try:
-                    rows = score_episode(part, matcher, episode_id, batch_size=batch_size, pool=pool, workers=workers,
-                                          bar=bar, held=held)
-                    atomic.write_parquet(chunks / f"{episode_id}.parquet", rows)
+                    score_into_chunk(part, prepared, chunks, episode_id, batch_size=batch_size, bar=bar)
                 finally:
                     lock.unlink(missing_ok=True)
             if deferred:

@@ -7,7 +7,6 @@ parquet file's metadata names the matcher, its config hash and the frame-set fin
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -17,10 +16,7 @@ import pandas as pd
 from pin_match import atomic
 from pin_match.contract.matcher import points_above
 from pin_match.errors import PinMatchError
-
-COLUMNS = ["frame_id", "episode_id", "step", "split", "score", "crop_scores", "points_x", "points_y",
-           "point_scores"]
-META_KEY = b"pin_match"
+from pin_match.scoring.schema import COLUMNS, decode_meta, encode_meta
 
 
 class ScoreTableError(PinMatchError, ValueError):
@@ -56,9 +52,8 @@ class ScoreTable:
         import pyarrow as pa
 
         table = pa.Table.from_pandas(self.frames[COLUMNS], preserve_index=False)
-        meta = dict(table.schema.metadata or {})
-        meta[META_KEY] = json.dumps(self.meta, sort_keys=True, default=str).encode()
-        atomic.write_parquet(path, table.replace_schema_metadata(meta))
+        atomic.write_parquet(path, table.replace_schema_metadata({**(table.schema.metadata or {}),
+                                                                  **encode_meta(self.meta)}))
 
     @classmethod
     def read(cls, path: str | Path) -> ScoreTable:
@@ -73,15 +68,15 @@ class ScoreTable:
             table = pq.read_table(path)
         except Exception as exc:  # pyarrow raises several kinds on a damaged file
             raise ScoreTableError(f"cannot read score table {path}: {exc}") from exc
-        raw = (table.schema.metadata or {}).get(META_KEY)
-        if raw is None:
+        meta = decode_meta(table.schema.metadata)
+        if meta is None:
             raise ScoreTableError(f"{path} is not a pin_match score table (no metadata)")
         frames = table.to_pandas()
         missing = [c for c in COLUMNS if c not in frames.columns]
         if missing:
             raise ScoreTableError(f"{path} lacks columns {missing}")
         require_finite(frames.frame_id, frames.score, str(path), ScoreTableError)
-        return cls(frames, json.loads(raw))
+        return cls(frames, meta)
 
 
 def table_in(directory: Path) -> Path:
