@@ -219,3 +219,39 @@ def test_disk_full_while_writing_the_cache_then_resume(tiny_frameset, tmp_path, 
     assert next(out.rglob("scores_all.parquet")).read_bytes() == \
         next((tmp_path / "ref").rglob("scores_all.parquet")).read_bytes()
     assert resumed.frames.equals(reference.frames)
+
+
+def _retyped(path, column: str, values) -> None:
+    frame = pd.read_parquet(path)
+    frame[column] = values(frame[column])
+    frame.to_parquet(path)
+
+
+CHUNK_DAMAGES = {
+    "overwritten with 3 bytes": (lambda p: p.write_bytes(b"abc"), "3 bytes"),
+    "cut short": (lambda p: p.write_bytes(p.read_bytes()[:p.stat().st_size // 2]), "parquet"),
+    "a column of another type": (lambda p: _retyped(p, "step", lambda s: s.astype(str)), "column step is"),
+    "a column missing": (lambda p: pd.read_parquet(p).drop(columns="point_scores").to_parquet(p), "columns"),
+}
+
+
+@pytest.mark.parametrize("damage", list(CHUNK_DAMAGES))
+def test_a_damaged_chunk_is_scored_again_and_said_so(tiny_frameset, tmp_path, capsys, damage):
+    damage_file, reason = CHUNK_DAMAGES[damage]
+    args = ("score", tiny_frameset.root, "--matcher", "color", "--quiet", "--out")
+    assert _run(capsys, *args, tmp_path / "ref")[0] == 0
+    out = tmp_path / "out"
+    assert _run(capsys, *args, out)[0] == 0
+    next(out.rglob("scores_all.parquet")).unlink()  # so that the chunks are read
+    (train, val) = sorted(out.rglob("chunks/*.parquet"))
+    damage_file(val)
+    kept = train.stat().st_mtime_ns
+    rc, err = _run(capsys, *args, out)
+    assert rc == 0 and len(err.splitlines()) == 1, err
+    assert "damaged score chunk" in err and str(val) in err and reason.lower() in err.lower()
+    assert "scoring episode 'ep_val' again" in err and "Traceback" not in err
+    assert next(out.rglob("scores_all.parquet")).read_bytes() == next((tmp_path / "ref").rglob(
+        "scores_all.parquet")).read_bytes()
+    assert train.stat().st_mtime_ns == kept  # the sound chunk was kept, not scored again
+    next(out.rglob("scores_all.parquet")).unlink()
+    assert _run(capsys, *args, out) == (0, "")  # the replaced chunk is sound
