@@ -171,8 +171,8 @@ def test_cli_scores_on_a_local_cluster_and_on_an_address(tiny_frameset, tmp_path
 
 
 def test_local_workers_keep_glibcs_allocator_and_a_run_on_dask_defaults_says_so(tiny_frameset, tmp_path, client):
-    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in every worker, which made effnet 2.3x slower a frame: the
-    local cluster leaves it unset, and a run on workers that have it (the fixture's) warns, naming it."""
+    """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in every worker, which slows torch matchers (docs/performance.md):
+    the local cluster leaves it unset, and a run on workers that have it (the fixture's) warns, naming it."""
     kw = dict(overrides={"delay": 0.0}, progress=False)
     with connect("local", workers=1) as local, warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
