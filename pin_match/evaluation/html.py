@@ -74,7 +74,7 @@ def table(df: pd.DataFrame, caption: str = "") -> str:
 
 def image(src: str, alt: str, width: int | None = None) -> str:
     size = f' width="{width}"' if width else ""
-    return f'<img src="{html.escape(src)}" alt="{html.escape(alt)}"{size} loading="lazy">'
+    return f'<img src="{html.escape(src)}" alt="{html.escape(alt)}"{size}>'
 
 
 def figure(images: Sequence[str], caption_lines: Sequence[str], cls: str | None = None) -> str:
