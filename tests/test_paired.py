@@ -103,3 +103,23 @@ def test_different_frames_are_refused():
     a = constructed()
     with pytest.raises(PairedError, match="B scored 0 frames|A scored 6 frames"):
         paired_comparison(a, a[a.episode_id != "e00"], 0.5, 0.5, n_boot=10)
+
+
+def test_compare_writes_the_folder(tiny_frameset, tmp_path):
+    from test_report_page import make_table
+
+    from pin_match.evaluation.compare import FILES, compare
+    from pin_match.evaluation.sigma import SigmaChoice
+    from pin_match.scoring.table import ScoreTable
+
+    a = make_table(tiny_frameset)
+    frames = a.frames.copy()
+    frames["score"] = np.where(frames.step == 0, 0.9, 0.1)  # B: the target and nothing else
+    b = ScoreTable(frames, {**a.meta, "matcher_id": "better@def"})
+    sigma = SigmaChoice(0.5, "given", "test")
+    paired, test = compare(a, b, tiny_frameset, sigma, sigma, tmp_path, split="all", n_boot=50)
+    assert paired.loc["FM-prec", "better@def"] == 100.0 and paired.loc["FM-prec", "stub@abc"] == 50.0
+    assert (test["only_a"], test["only_b"], test["both"]) == (0, 1, 1)
+    assert all((tmp_path / name).is_file() for name in FILES)
+    page = (tmp_path / "compare.html").read_text(encoding="utf-8")
+    assert "ep_val_0002" in page and "McNemar" in page  # the planted false alarm of A is a disagreement
