@@ -102,3 +102,16 @@ def test_gallery_figure_for_notebooks(tiny):
     scored = scored_frames(frame_labels(fs), table)
     fig = section_figure(fs, table, sections(scored, SIGMA)[0], SIGMA, max_frames=2)
     assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title()
+
+
+def test_index_links_every_report_and_shows_the_tables(tiny, tmp_path):
+    from pin_match.evaluation.index_page import write_index
+
+    fs, table = tiny
+    for name in ("a", "b"):
+        report(table, fs, tmp_path / "reports" / name, sigma=SIGMA, split="val", n_boot=10)
+    joint = pd.DataFrame({"TM": [12.5]}, index=pd.Index(["stub@abc"], name="Matcher"))
+    page = write_index(tmp_path, {"synthetic": joint}, {"synthetic": "the caption"})
+    text = page.read_text(encoding="utf-8")
+    assert re.findall(r'<a href="([^"]+)"', text) == ["reports/a/report.html", "reports/b/report.html"]
+    assert "the caption" in text and "12.50" in text

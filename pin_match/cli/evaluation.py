@@ -87,16 +87,18 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.bench import bench
+    from pin_match.evaluation.index_page import write_index
     from pin_match.evaluation.tables import markdown_table
 
     joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
                      batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
     print(markdown_table(joint))
-    print(f"-> {a.out}")
+    print(f"-> {write_index(a.out, {'bench': joint}, {'bench': f'{a.frameset}, val split'})}")
 
 
 def _cmd_demo(a: argparse.Namespace) -> None:
     from pin_match.evaluation.bench import LOOKALIKE_MATCHERS, OFFLINE_MATCHERS, Stopwatch, demo
+    from pin_match.evaluation.index_page import write_index
     from pin_match.evaluation.tables import markdown_table
 
     watch = Stopwatch()
@@ -111,6 +113,7 @@ def _cmd_demo(a: argparse.Namespace) -> None:
         print(markdown_table(joint))
     print(f"\nreports, plots, thresholds and score tables: {out}")
     print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")
+    print(f"\nevery report and both tables, one page: {write_index(out, tables, captions)}")
 
 
 def _table_arguments(s: argparse.ArgumentParser) -> None:
