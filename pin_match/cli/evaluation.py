@@ -93,6 +93,10 @@ def _cmd_bench(a: argparse.Namespace) -> None:
     joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
                      batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
     print(markdown_table(joint))
+    if len(a.matcher) > 1:
+        from pin_match.evaluation.compare import compare_bench
+
+        print("paired comparisons:", *compare_bench(a.out, a.frameset), sep="\n  ")
     print(f"-> {write_index(a.out, {'bench': joint}, {'bench': f'{a.frameset}, val split'})}")
 
 

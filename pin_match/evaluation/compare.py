@@ -43,6 +43,24 @@ def compare(table_a: ScoreTable, table_b: ScoreTable, fs: FrameSet, sigma_a: Sig
     return paired, test
 
 
+def compare_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = None, split: str = "val",
+                  n_boot: int = 1000) -> list[Path]:
+    """Every matcher of a bench folder against the first, into ``run_dir/compare/<B>_vs_<A>/``; the pages."""
+    from pin_match.evaluation.analysis import load_bench
+
+    run = load_bench(run_dir, frameset)
+    first, *others = run.matchers
+    choice = {m: SigmaChoice(run.sigmas[m], run.reports[m]["sigma_source"], run.reports[m]["sigma_detail"])
+              for m in run.matchers}
+    pages = []
+    for other in others:
+        out = Path(run_dir) / "compare" / f"{other}_vs_{first}"
+        compare(run.tables[first], run.tables[other], run.frameset, choice[first], choice[other], out, split=split,
+                n_boot=n_boot)
+        pages.append(out / FILES[2])
+    return pages
+
+
 def summary_lines(paired: pd.DataFrame, test: dict, names: tuple[str, str], sigma_a: SigmaChoice,
                   sigma_b: SigmaChoice, split: str | None) -> list[str]:
     a = paired.attrs
