@@ -17,7 +17,8 @@ from pin_match.evaluation.bench import bench
 
 REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPO / "notebooks").glob("[0-9][0-9]_*.ipynb"))
-NAMES = ["01_benchmark_overview", "02_threshold_tuning", "03_similarity", "04_error_gallery", "05_training"]
+NAMES = ["01_benchmark_overview", "02_threshold_tuning", "03_similarity", "04_error_gallery", "05_training",
+         "06_report_galleries"]
 MATCHERS = ["sift", "color"]
 
 

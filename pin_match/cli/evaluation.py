@@ -43,10 +43,16 @@ def _cmd_tune(a: argparse.Namespace) -> None:
 
     fs = FrameSet.load(a.frameset)
     table = _table(a, fs)
-    result = tune(table, fs, objective=a.objective, split=a.split)
+    if a.policy is None:
+        result = tune(table, fs, objective=a.objective, split=a.split)
+    else:
+        from pin_match.evaluation.policies import StopPolicy, tune_policy
+
+        result = tune_policy(table, fs, StopPolicy.parse(a.policy), objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
+    policy = f", stop policy {result['policy']}" if "policy" in result else ""
     print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
-          f"{result['objective_value']:.4g}) -> {path}")
+          f"{result['objective_value']:.4g}{policy}) -> {path}")
 
 
 def _cmd_report(a: argparse.Namespace) -> None:
@@ -81,16 +87,22 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.bench import bench
+    from pin_match.evaluation.index_page import write_index
     from pin_match.evaluation.tables import markdown_table
 
     joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
                      batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
     print(markdown_table(joint))
-    print(f"-> {a.out}")
+    if len(a.matcher) > 1:
+        from pin_match.evaluation.compare import compare_bench
+
+        print("paired comparisons:", *compare_bench(a.out, a.frameset), sep="\n  ")
+    print(f"-> {write_index(a.out, {'bench': joint}, {'bench': f'{a.frameset}, val split'})}")
 
 
 def _cmd_demo(a: argparse.Namespace) -> None:
     from pin_match.evaluation.bench import LOOKALIKE_MATCHERS, OFFLINE_MATCHERS, Stopwatch, demo
+    from pin_match.evaluation.index_page import write_index
     from pin_match.evaluation.tables import markdown_table
 
     watch = Stopwatch()
@@ -105,6 +117,7 @@ def _cmd_demo(a: argparse.Namespace) -> None:
         print(markdown_table(joint))
     print(f"\nreports, plots, thresholds and score tables: {out}")
     print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")
+    print(f"\nevery report and both tables, one page: {write_index(out, tables, captions)}")
 
 
 def _table_arguments(s: argparse.ArgumentParser) -> None:
@@ -129,6 +142,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--split", default="train",
                    help="split to tune on (default train; tuning on the split you report is optimistic)")
     s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
+    s.add_argument("--policy", metavar="K-of-N",
+                   help="tune for this stop policy: found when K of the last N frames are above sigma (default "
+                        "1-of-1, PIN's rule; docs/metrics.md)")
     s.set_defaults(func=_cmd_tune)
 
     s = sub.add_parser("report", help="metrics, tables and plots of a score table at one sigma",

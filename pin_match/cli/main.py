@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli import evaluation, training
+from pin_match.cli import evaluation, pages, training
 from pin_match.cli.args import add_matcher_config, matcher_overrides
 from pin_match.errors import PinMatchError
 
@@ -201,6 +201,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.set_defaults(func=_cmd_list)
 
     evaluation.add_commands(sub)
+    pages.add_commands(sub)
     training.add_commands(sub)
     return p
 

@@ -1,7 +1,8 @@
 """One matcher's report folder at one sigma: metrics.json, per_category.csv, the paper's tables, plots.
 
 ``report`` only assembles: sigma comes from ``pin_match.evaluation.sigma``, numbers from
-``pin_match.evaluation``, tables from ``pin_match.evaluation.tables``, figures from ``pin_match.evaluation.plots``.
+``pin_match.evaluation``, tables from ``pin_match.evaluation.tables``, figures from ``pin_match.evaluation.plots``,
+the page (``report.html``, with galleries) from ``pin_match.evaluation.report_page``.
 Every file names the sigma and where it came from (metrics.json: ``sigma``,
 ``sigma_source``, ``sigma_detail``; the tables: a "sigma from" column and the caption).
 """
@@ -14,13 +15,14 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.evaluator import evaluate
 from pin_match.evaluation.plots import plot_per_category, plot_score_distributions, plot_sigma_curves
+from pin_match.evaluation.report_page import write_report_page
 from pin_match.evaluation.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tables import category_table, latex_table, markdown_table, report_row, side_by_side
 from pin_match.scoring.table import ScoreTable
 
 FILES = ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma_curves.png",
-         "score_distributions.png", "per_category.png")
+         "score_distributions.png", "per_category.png", "report.html")
 
 
 def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float | SigmaChoice | None = None,
@@ -48,4 +50,5 @@ def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float
     plot_sigma_curves(sweep(scored), choice.value, files[4], title)
     plot_score_distributions(scored, choice.value, files[5], title)
     plot_per_category(categories, files[6], title)
+    write_report_page(files[7], table, fs, scored, result, overall, per_cat)
     return {**result, "files": [str(f) for f in files]}

@@ -85,7 +85,7 @@ def format_value(value: object, decimals: int | None) -> str:
     return f"{float(value):.{decimals}f}"
 
 
-def _rows(df: pd.DataFrame) -> list[list[str]]:
+def text_rows(df: pd.DataFrame) -> list[list[str]]:
     return [[str(index)] + [format_value(v, _decimals(c)) for c, v in row.items()] for index, row in df.iterrows()]
 
 
@@ -93,7 +93,7 @@ def markdown_table(df: pd.DataFrame) -> str:
     header = [df.index.name or "", *df.columns]
     align = ["---:" if pd.api.types.is_numeric_dtype(df[c]) else "---" for c in df.columns]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---", *align]) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in _rows(df)]
+    lines += ["| " + " | ".join(r) + " |" for r in text_rows(df)]
     return "\n".join(lines)
 
 
@@ -108,7 +108,7 @@ def latex_table(df: pd.DataFrame, caption: str = "") -> str:
     cols = "".join("r" if pd.api.types.is_numeric_dtype(df[c]) else "l" for c in df.columns)
     lines = [r"\begin{table}[t]", r"\centering", r"\begin{tabular}{l" + cols + "}", r"\toprule",
              " & ".join(_tex(h) for h in header) + r" \\", r"\midrule"]
-    lines += [" & ".join(_tex(c) for c in r) + r" \\" for r in _rows(df)]
+    lines += [" & ".join(_tex(c) for c in r) + r" \\" for r in text_rows(df)]
     lines += [r"\bottomrule", r"\end{tabular}"]
     if caption:
         lines.append(r"\caption{" + _tex(caption) + "}")

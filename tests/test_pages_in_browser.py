@@ -1,0 +1,81 @@
+"""A real browser opens report.html and inspect's page: every image loads and the screenshot is not blank.
+
+Headless Chromium (Debian: ``apt-get install -y chromium``; ``.ci/run`` installs it when
+missing). The check page is a copy of the page under test with one small script that, once
+everything has loaded, writes into the title how many ``<img>`` have no pixels
+(``naturalWidth == 0``); ``--dump-dom`` prints that title. Set PIN_MATCH_SCREENSHOTS to a folder
+to keep the screenshots (the README's is docs/img/report.png).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pytest
+from PIL import Image
+from test_report_page import SIGMA, make_table
+
+from pin_match.evaluation.frameset_page import write_frameset_page
+from pin_match.evaluation.report import report
+
+BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
+PROBE = """<script>
+window.addEventListener("load", () => {
+  const images = Array.from(document.images);
+  const broken = images.filter(i => !i.complete || i.naturalWidth === 0).map(i => i.getAttribute("src"));
+  document.title = "IMAGES " + images.length + " BROKEN " + broken.length + " " + broken.join(",");
+});
+</script>
+"""
+
+
+@pytest.fixture(scope="module")
+def browser() -> str:
+    found = next((shutil.which(b) for b in BROWSERS if shutil.which(b)), None)
+    if found is None:
+        pytest.skip("no headless Chromium on this machine: install it with `apt-get install -y chromium` "
+                    "(.ci/run does when it is missing)")
+    return found
+
+
+def run_browser(browser: str, *args: str) -> str:
+    cmd = [browser, "--headless", "--no-sandbox", "--disable-gpu", "--hide-scrollbars",
+           "--allow-file-access-from-files", "--virtual-time-budget=20000", *args]
+    done = subprocess.run(cmd, capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr[-2000:]
+    return done.stdout
+
+
+def check_page(browser: str, page: Path, shot_name: str) -> None:
+    probe = page.with_name(f"_probe_{page.name}")
+    probe.write_text(page.read_text(encoding="utf-8").replace("</body>", PROBE + "</body>"), encoding="utf-8")
+    dom = run_browser(browser, "--dump-dom", probe.as_uri())
+    verdict = re.search(r"<title>IMAGES (\d+) BROKEN (\d+)([^<]*)</title>", dom)
+    assert verdict, f"the check script did not run in {page}"
+    assert int(verdict.group(1)) > 0 and int(verdict.group(2)) == 0, f"images not loaded: {verdict.group(3)}"
+    probe.unlink()
+
+    shot = page.with_name(shot_name)
+    run_browser(browser, "--window-size=1280,1600", f"--screenshot={shot}", page.as_uri())
+    pixels = np.asarray(Image.open(shot).convert("RGB"), np.float32)
+    assert pixels.shape[:2] == (1600, 1280)
+    assert pixels.std() > 20 and len(np.unique(pixels.reshape(-1, 3), axis=0)) > 500, "blank screenshot"
+    keep = os.environ.get("PIN_MATCH_SCREENSHOTS")
+    if keep:
+        Path(keep).mkdir(parents=True, exist_ok=True)
+        shutil.copy(shot, Path(keep) / shot_name)
+
+
+def test_report_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
+    report(make_table(tiny_frameset), tiny_frameset, tmp_path, sigma=SIGMA, split="all", n_boot=20)
+    check_page(browser, tmp_path / "report.html", "report.png")
+
+
+def test_frameset_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
+    page = write_frameset_page(tiny_frameset, tmp_path, per_role=2)
+    check_page(browser, page, "inspect.png")

@@ -1,0 +1,117 @@
+"""report.html and its galleries on the tiny hand-made frame-set, where the right content is known in advance."""
+
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pin_match.evaluation.gallery import OUTLINE_RGB, POINT_RGB, draw_frame, frame_points, section_figure, sections
+from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.evaluation.report import report
+from pin_match.scoring.table import ScoreTable
+
+# per episode, steps 0..3 show: the target, a same-category look-alike, an other-category object, nothing
+SCORES = {"ep_train": [0.9, 0.2, 0.1, 0.1], "ep_val": [0.3, 0.6, 0.95, 0.1]}
+PLANTED = "ep_val_0002"   # the highest-scoring frame without the target: an other-category object
+PLANTED_POINT = (50.0, 60.0)
+SIGMA = 0.5
+
+
+def make_table(fs) -> ScoreTable:
+    rows = []
+    for episode, scores in SCORES.items():
+        for step, score in enumerate(scores):
+            frame_id = f"{episode}_{step:04d}"
+            x, y = PLANTED_POINT if frame_id == PLANTED else (148.0, 348.0)
+            rows.append(dict(frame_id=frame_id, episode_id=episode, step=step, split=episode.split("_")[1],
+                             score=score, crop_scores=[score], points_x=[x], points_y=[y], point_scores=[score]))
+    meta = dict(matcher="stub", matcher_id="stub@abc", config_hash="abc", config={"weights": "none.pt"},
+                frameset_fingerprint=fs.fingerprint, default_sigma=SIGMA, modality="visual")
+    return ScoreTable(pd.DataFrame(rows), meta)
+
+
+@pytest.fixture(scope="module")
+def tiny(tiny_frameset):
+    return tiny_frameset, make_table(tiny_frameset)
+
+
+def test_sections_hold_the_planted_frames(tiny):
+    fs, table = tiny
+    scored = scored_frames(frame_labels(fs), table)
+    by_key = {s.key: s for s in sections(scored, SIGMA)}
+    alarms = by_key["false_alarms"].frames
+    assert alarms.frame_id.iloc[0] == PLANTED and alarms.role.iloc[0] == "other"
+    assert "target" not in set(alarms.role) and by_key["false_alarms"].n_total == 6
+    assert list(by_key["misses"].frames.frame_id) == ["ep_val_0000", "ep_train_0000"]
+    first = by_key["first_match"].frames.set_index("episode_id")
+    assert first.loc["ep_train", "role"] == "target"
+    assert first.loc["ep_val", "role"] == "same-category look-alike"  # 0.6 at step 1 comes before the target
+    capped = {s.key: s for s in sections(scored, SIGMA, cap=2)}["false_alarms"]
+    assert len(capped.frames) == 2 and capped.n_total == 6
+
+
+def test_points_are_drawn_where_the_stored_row_says(tiny):
+    fs, table = tiny
+    points = frame_points(table, PLANTED, SIGMA)
+    np.testing.assert_allclose(points, [PLANTED_POINT])
+    drawn = draw_frame(fs, PLANTED, points)
+    x, y = map(int, PLANTED_POINT)
+    assert tuple(drawn[y, x]) == POINT_RGB
+    assert tuple(fs.image(PLANTED)[y, x]) != POINT_RGB
+    assert len(frame_points(table, "ep_val_0003", SIGMA)) == 0  # below sigma: nothing to draw
+
+
+def test_mask_outline_follows_the_target_mask(tiny):
+    fs, _ = tiny
+    drawn = draw_frame(fs, "ep_val_0000")
+    green = np.all(drawn == OUTLINE_RGB["target"], axis=2)
+    mask = fs.instance_mask("ep_val_0000") > 0
+    ys, xs = np.nonzero(mask)
+    gy, gx = np.nonzero(green)
+    assert green.sum() > 50
+    assert gy.min() >= ys.min() - 3 and gy.max() <= ys.max() + 3
+    assert gx.min() >= xs.min() - 3 and gx.max() <= xs.max() + 3
+    assert not green[ys.mean().astype(int), xs.mean().astype(int)]  # the inside is not painted
+
+
+def test_report_writes_a_self_contained_page(tiny, tmp_path):
+    fs, table = tiny
+    result = report(table, fs, tmp_path, sigma=SIGMA, split="val", n_boot=20)
+    page = tmp_path / "report.html"
+    assert str(page) in result["files"]
+    text = page.read_text(encoding="utf-8")
+    for needle in ("stub@abc", fs.fingerprint, "none.pt", "sigma", "Per target category", "false alarms"):
+        assert needle in text
+    assert "http://" not in text and "https://" not in text and "<script" not in text
+    sources = re.findall(r'<img src="([^"]+)"', text)
+    assert len(sources) >= 3 + 4
+    for src in sources:
+        assert (tmp_path / src).is_file() and (tmp_path / src).stat().st_size > 0
+    alarms = text[text.index('id="false_alarms"'):text.index('id="misses"')]
+    assert alarms.index(f"frame {PLANTED}") < alarms.index("frame ep_val_0001")
+
+
+def test_gallery_figure_for_notebooks(tiny):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    fs, table = tiny
+    scored = scored_frames(frame_labels(fs), table)
+    fig = section_figure(fs, table, sections(scored, SIGMA)[0], SIGMA, max_frames=2)
+    assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title()
+
+
+def test_index_links_every_report_and_shows_the_tables(tiny, tmp_path):
+    from pin_match.evaluation.index_page import write_index
+
+    fs, table = tiny
+    for name in ("a", "b"):
+        report(table, fs, tmp_path / "reports" / name, sigma=SIGMA, split="val", n_boot=10)
+    joint = pd.DataFrame({"TM": [12.5]}, index=pd.Index(["stub@abc"], name="Matcher"))
+    page = write_index(tmp_path, {"synthetic": joint}, {"synthetic": "the caption"})
+    text = page.read_text(encoding="utf-8")
+    assert re.findall(r'<a href="([^"]+)"', text) == ["reports/a/report.html", "reports/b/report.html"]
+    assert "the caption" in text and "12.50" in text
