@@ -16,8 +16,9 @@ from pathlib import Path
 
 def _time_frames(n: int) -> float:
     """Seconds per rendered episode frame (render + mask + camera effects + encoding), one process."""
+    from pin_match.data.compose import stable_seed
     from pin_match.data.synth.generate import EpisodePlan, plan_episodes, render_episode
-    from pin_match.data.synth.objects import make_objects, stable_seed
+    from pin_match.data.synth.objects import make_objects
 
     specs = make_objects(0, 4)
     episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]

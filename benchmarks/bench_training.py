@@ -19,6 +19,7 @@ from pathlib import Path
 import torch
 
 from benchmarks.framesets import CACHE
+from pin_match.data.frameset import MANIFEST
 
 # the training frame-set: twice the demo's episodes, so the train split has 24 episodes (768 frames)
 SYNTH = dict(seed=0, episodes=48, objects_per_category=10, frames_per_episode=32)
@@ -35,7 +36,7 @@ def _frameset(quick: bool):
 
     sizes = QUICK if quick else SYNTH
     root = CACHE / ("training_quick" if quick else "training_synth{episodes}".format(**sizes))
-    if (root / "frameset.json").exists():
+    if (root / MANIFEST).exists():
         return FrameSet.load(root)
     return generate(root, overwrite=True, **sizes)
 
@@ -46,7 +47,7 @@ def _real_frameset():
     except ImportError:
         return None
     root = CACHE / "realset"
-    if (root / "frameset.json").exists():
+    if (root / MANIFEST).exists():
         from pin_match.data.frameset import FrameSet
 
         return FrameSet.load(root)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pin_match.data.frameset import FrameSet
+from pin_match.data.frameset import MANIFEST, FrameSet
 from pin_match.data.writer import FrameSetWriter
 
 CACHE = Path("pin_match_runs") / "benchmarks"
@@ -20,10 +20,10 @@ def synthetic(episodes: int, name: str) -> FrameSet:
     from pin_match.data.synth import DEFAULTS, generate
     from pin_match.evaluation.bench import DEMO_OUT
 
-    if episodes == DEFAULTS["episodes"] and (DEMO_OUT / "frameset" / "frameset.json").exists():
+    if episodes == DEFAULTS["episodes"] and (DEMO_OUT / "frameset" / MANIFEST).exists():
         return FrameSet.load(DEMO_OUT / "frameset")
     root = CACHE / name
-    if (root / "frameset.json").exists():
+    if (root / MANIFEST).exists():
         return FrameSet.load(root)
     return generate(root, seed=0, episodes=episodes, overwrite=True)
 
@@ -32,7 +32,7 @@ def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> F
     """Many cheap frames (coloured rectangles, one of them the target) for memory and throughput scaling."""
     root = CACHE / (f"procedural_{n_frames}" if frames_per_episode == 100 else
                     f"procedural_{n_frames}_per{frames_per_episode}")
-    if (root / "frameset.json").exists():
+    if (root / MANIFEST).exists():
         return FrameSet.load(root)
     rng = np.random.default_rng(seed)
     w = FrameSetWriter(root, root.name, overwrite=True)
@@ -59,6 +59,6 @@ def real_photos(seed: int = 0) -> FrameSet:
     from pin_match.data.realset import build
 
     root = CACHE / ("realset" if seed == 0 else f"realset_seed{seed}")
-    if (root / "frameset.json").exists():
+    if (root / MANIFEST).exists():
         return FrameSet.load(root)
     return build(root, seed=seed, overwrite=True)

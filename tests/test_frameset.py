@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.data.frameset import FrameSet, FrameSetError, read_image
+from pin_match.data.frameset import MANIFEST, FrameSet, FrameSetError, read_image
 from pin_match.data.writer import FrameSetWriter
 
 
@@ -68,13 +68,13 @@ def test_fingerprint_changes_with_content(broken, tiny_frameset):
 
 
 def test_missing_manifest(broken):
-    (broken / "frameset.json").unlink()
+    (broken / MANIFEST).unlink()
     with pytest.raises(FrameSetError, match=r"missing file .*frameset\.json"):
         FrameSet.load(broken)
 
 
 def test_newer_format_version(broken):
-    _edit_json(broken / "frameset.json", lambda d: d.__setitem__("version", 99))
+    _edit_json(broken / MANIFEST, lambda d: d.__setitem__("version", 99))
     with pytest.raises(FrameSetError, match=r"frameset\.json has format version 99.*upgrade pin_match"):
         FrameSet.load(broken)
 

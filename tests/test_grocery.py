@@ -21,7 +21,8 @@ from pin_match.data.grocery import (
     prepare_grocery,
     product_splits,
 )
-from pin_match.data.lookalikes import LookalikeError, build, load_photos, plan_episodes
+from pin_match.data.lookalike_source import LookalikeError, load_photos
+from pin_match.data.lookalikes import build, plan_episodes
 
 HEADER = ["Class Name (str)", "Class ID (int)", "Coarse Class Name (str)", "Coarse Class ID (int)",
           "Iconic Image Path (str)", "Product Description Path (str)"]

@@ -9,18 +9,18 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
-from pin_match.data.lookalikes import (
+from pin_match.data.lookalike_source import (
+    OPTIONAL_PHOTO_COLUMNS,
     PHOTO_COLUMNS,
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
-    _write_csv,
-    build,
     instance_splits,
     load_photos,
     object_mask,
-    plan_episodes,
+    write_csv,
 )
+from pin_match.data.lookalikes import build, plan_episodes
 
 
 def _photo(colour: tuple[int, int, int], seed: int, hand: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -110,12 +110,12 @@ def test_optional_columns_are_checked(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "photos.csv", encoding="utf-8")))
     for r in rows:
         r.update(split="test", use="")
-    _write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, "split", "use"), rows)
+    write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
     with pytest.raises(LookalikeError, match=r"photos.csv: photo 'mug1_0' has split 'test'"):
         load_photos(tmp_path)
     for r in rows:
         r.update(split="val", use="ref")
-    _write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, "split", "use"), rows)
+    write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
     with pytest.raises(LookalikeError, match="use 'ref'"):
         load_photos(tmp_path)
 
@@ -130,10 +130,10 @@ def _source(root, colours: dict[str, tuple[int, int, int]], per_instance: int = 
             rows.append(dict(photo_id=f"{inst}_{k}", instance_id=inst, category=inst[:-1],
                              file=f"photos/{inst}_{k}.png", mask=f"masks/{inst}_{k}.png",
                              source="test", source_path="-", licence="-"))
-    _write_csv(root / "photos.csv", PHOTO_COLUMNS, rows)
+    write_csv(root / "photos.csv", PHOTO_COLUMNS, rows)
     room = np.clip(np.random.default_rng(7).normal(90, 20, (240, 320, 3)), 0, 255).astype(np.uint8)
     atomic.write_image(root / "rooms/r1.png", room)
-    _write_csv(root / "rooms.csv", ROOM_COLUMNS,
+    write_csv(root / "rooms.csv", ROOM_COLUMNS,
                [dict(room_id="r1", file="rooms/r1.png", source="test", source_path="-", licence="-")])
 
 
@@ -194,7 +194,7 @@ def shipped_pasted(tmp_path_factory):
 
 
 def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_pasted):
-    from pin_match.data.lookalikes import PACKAGED_SRC
+    from pin_match.data.lookalike_source import PACKAGED_SRC
 
     assert (len(shipped_pasted.objects), len(shipped_pasted.episodes), len(shipped_pasted.frames)) == (43, 26, 289)
     assert set(shipped_pasted.episodes.split) == {"train", "val"}

@@ -10,8 +10,8 @@ import pytest
 
 pytest.importorskip("skimage")
 
-from pin_match.data import realset  # noqa: E402
-from pin_match.data.frameset import FrameSet  # noqa: E402
+from pin_match.data import realset, realset_photos  # noqa: E402
+from pin_match.data.frameset import MANIFEST, FrameSet  # noqa: E402
 
 SEED = 3
 
@@ -83,11 +83,11 @@ def test_instance_masks_are_the_pasted_masks(fs):
 
 
 def test_same_seed_same_bytes_other_seed_other_frames(fs, tmp_path):
-    realset.cutout_rgba.cache_clear()  # GrabCut runs again: it must come out the same
+    realset_photos.cutout_rgba.cache_clear()  # GrabCut runs again: it must come out the same
     again = realset.build(tmp_path / "again", seed=SEED, targets=("patch_purple",))
     mine, theirs = _digests(fs), _digests(again)
     shared = [k for k in theirs if k in mine and not k.startswith(("frames.parquet", "visibility", "objects.csv",
-                                                                     "episodes", "objects_desc", "frameset.json"))]
+                                                                     "episodes", "objects_desc", MANIFEST))]
     assert any(k.startswith("frames/real_patch_purple/") for k in shared)
     assert any(k.startswith("objects_images/patch_purple/") for k in shared)
     assert {k: mine[k] for k in shared} == {k: theirs[k] for k in shared}
@@ -98,19 +98,19 @@ def test_same_seed_same_bytes_other_seed_other_frames(fs, tmp_path):
 
 
 def test_missing_scikit_image_names_the_package(monkeypatch, tmp_path):
-    realset.photo.cache_clear()
-    realset.cutout_rgba.cache_clear()
+    realset_photos.photo.cache_clear()
+    realset_photos.cutout_rgba.cache_clear()
     monkeypatch.setitem(sys.modules, "skimage", None)
     monkeypatch.setitem(sys.modules, "skimage.data", None)
     try:
-        with pytest.raises(realset.RealSetError, match="scikit-image"):
+        with pytest.raises(realset_photos.RealSetError, match="scikit-image"):
             realset.build(tmp_path / "x", targets=("cup_red",))
     finally:
-        realset.photo.cache_clear()
-        realset.cutout_rgba.cache_clear()
+        realset_photos.photo.cache_clear()
+        realset_photos.cutout_rgba.cache_clear()
     assert not (tmp_path / "x").exists()
 
 
 def test_unknown_target_is_refused(tmp_path):
-    with pytest.raises(realset.RealSetError, match="no_such_thing"):
+    with pytest.raises(realset_photos.RealSetError, match="no_such_thing"):
         realset.build(tmp_path / "x", targets=("no_such_thing",))

@@ -52,7 +52,8 @@ def _cmd_realset(a: argparse.Namespace) -> None:
 
 
 def _cmd_lookalikes(a: argparse.Namespace) -> None:
-    from pin_match.data.lookalikes import LookalikeError, build, prepare_core50
+    from pin_match.data.lookalike_source import LookalikeError
+    from pin_match.data.lookalikes import build, prepare_core50
 
     prepare = "--prepare-from" if a.prepare_from else "--prepare-grocery" if a.prepare_grocery else None
     if (a.src if prepare else a.out) is None:

@@ -1,7 +1,8 @@
 """Frame-sets: loading and validating them, writing them, and the sources that make them.
 
-Sources: a PIN recording (``import_recording``), the synthetic generator (``synth``) and
-the real-photo set (``realset``). Nothing here knows a matcher.
+Sources: a PIN recording (``import_recording``), the synthetic generator (``synth``), the
+recolour set (``realset``) and the real look-alike sets (``lookalikes``, ``grocery``); the
+frame geometry and compositing they share live in ``compose``. Nothing here knows a matcher.
 """
 
 from pin_match.data.frameset import FrameSet, FrameSetError

@@ -40,20 +40,21 @@ import cv2
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.lookalikes import (
+from pin_match.data.compose import largest_piece, stable_seed
+from pin_match.data.lookalike_source import (
+    OPTIONAL_PHOTO_COLUMNS,
     PACKAGED_SRC,
     PHOTO_COLUMNS,
     REFERENCE_USE,
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
-    _read_csv,
-    _read_rgb,
-    _write_csv,
     instance_splits,
     object_mask,
+    read_csv,
+    read_rgb,
+    write_csv,
 )
-from pin_match.data.realset import stable_seed
 
 GROCERY_SOURCE = "github:marcusklasson/GroceryStoreDataset"
 GROCERY_LICENCE = "MIT (Grocery Store Dataset, Klasson et al. 2019; Copyright (c) 2019 Marcus Klasson; file LICENSE)"
@@ -63,7 +64,7 @@ PHOTOS_PER_PRODUCT = 6
 MIN_PRODUCTS_TO_HALVE = 4  # halving fewer would leave a product without a look-alike in its split
 BACKGROUND_TOLERANCE = 24  # iconic images: a pixel is product when a channel differs this much from the border
 CLASS_COLUMNS = ("Class Name (str)", "Coarse Class Name (str)", "Iconic Image Path (str)")
-OUTPUT_COLUMNS = (*PHOTO_COLUMNS, "split", "use")
+OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -93,9 +94,8 @@ def plain_background_mask(rgb: np.ndarray, tolerance: int = BACKGROUND_TOLERANCE
     border = np.concatenate([rgb[0], rgb[-1], rgb[:, 0], rgb[:, -1]]).astype(np.int16)
     differs = (np.abs(rgb.astype(np.int16) - np.median(border, axis=0)).max(axis=2) > tolerance).astype(np.uint8)
     out = np.zeros((h, w), np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(differs, connectivity=8)
-    if n > 1:
-        piece = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
+    piece = largest_piece(differs)
+    if piece.any():
         cv2.fillConvexPoly(out, cv2.convexHull(cv2.findNonZero(piece)), 255)
     return out
 
@@ -186,19 +186,19 @@ def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_pro
         rows = []
         for p in products:
             iconic_id = f"{p.instance_id}_iconic"
-            mask = plain_background_mask(_read_rgb(repo / p.iconic))
+            mask = plain_background_mask(read_rgb(repo / p.iconic))
             if not mask.any():
                 raise LookalikeError(f"iconic image {repo / p.iconic} shows nothing on its plain background")
             rows.append(_photo_row(repo, stage, p, iconic_id, p.iconic, mask, source, split, REFERENCE_USE))
             for photo in spread(p.photos, photos_per_product):
                 photo_id = f"grocery_{photo.parts[1]}_{photo.stem.lower()}"  # dataset/<folder>/.../<name>.jpg
-                rows.append(_photo_row(repo, stage, p, photo_id, photo, object_mask(_read_rgb(repo / photo)),
+                rows.append(_photo_row(repo, stage, p, photo_id, photo, object_mask(read_rgb(repo / photo)),
                                        source, split, ""))
-        _write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = _read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
+        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
+        room_rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
         for r in room_rows:
             atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
-        _write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
         atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, products, rows,
                                                        room_rows))
         if out.exists():
@@ -229,7 +229,7 @@ def _notice(licence_text: str, commit: str | None, products: list[Product], rows
 - `photos/` ({n_iconic} iconic product images and {len(rows) - n_iconic} store photos of
   {len(products)} packaged products) and the masks made from them (`masks/`: iconic images by
   `pin_match.data.grocery.plain_background_mask`, store photos by
-  `pin_match.data.lookalikes.object_mask`): **Grocery Store Dataset**, M. Klasson, C. Zhang and
+  `pin_match.data.lookalike_source.object_mask`): **Grocery Store Dataset**, M. Klasson, C. Zhang and
   H. Kjellstroem, "A Hierarchical Grocery Store Image Dataset with Visual and Semantic Labels",
   WACV 2019, https://github.com/marcusklasson/GroceryStoreDataset, commit {commit or 'unknown (not a git checkout)'}.
   Licence: **MIT**, copied below. Each photo's path in that repository is in `photos.csv`.

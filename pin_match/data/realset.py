@@ -3,8 +3,8 @@
 Synthetic renders say little about whether a pretrained network recognises a real object;
 this set does, with nothing downloaded. Objects (a cup, a motorcycle, a rocket, a mission
 patch, a cat, a helmet) are cut out of scikit-image's bundled sample photos with GrabCut
-started from hand-set polygons, then pasted at other scales, rotations and positions onto
-other real photos and textures. Each target has a same-category look-alike: a recoloured
+started from hand-set polygons (``realset_photos``), then pasted at other scales, rotations
+and positions onto other real photos and textures. Each target has a same-category look-alike: a recoloured
 copy, or for the rocket another instance of the kind (the shuttle model in ``astronaut``).
 
 Every frame's instance mask is the exact union of the pasted masks (later pastes occlude
@@ -18,105 +18,21 @@ under scale, rotation, background and colour change, not under a new viewpoint.
 
 from __future__ import annotations
 
-import functools
-import zlib
-from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, paste, room_crop, scale_brightness, stable_seed
 from pin_match.data.frameset import FrameSet
+from pin_match.data.realset_photos import BACKGROUNDS, RealSetError, cutout_rgba
 from pin_match.data.writer import FrameSetWriter
-from pin_match.errors import PinMatchError
 
-FRAME_HEIGHT, FRAME_WIDTH = 640, 360
 REALSET_VERSION = 1
-GRABCUT_MARGIN = 48  # px of surroundings GrabCut sees around a polygon
 DEFAULT_SEED = 0
 # per episode: frames with the target, with only its look-alike, with other objects only, with nothing
 FRAME_KINDS = ("target",) * 5 + ("lookalike",) * 3 + ("other",) * 2 + ("empty",) * 2
-
-
-def stable_seed(*parts: object) -> int:
-    """A seed from names and numbers (as the synthetic generator's), without importing its renderer."""
-    return zlib.crc32("/".join(str(p) for p in parts).encode()) & 0x7FFFFFFF
-
-
-class RealSetError(PinMatchError, RuntimeError):
-    """The real-photo set cannot be built here (scikit-image missing or its photos unreadable)."""
-
-
-def _skimage_data():
-    try:
-        import skimage.data
-    except ImportError as exc:
-        raise RealSetError("the real-photo frame-set needs scikit-image (pip install 'pin-match[test]' "
-                           "or pip install scikit-image)") from exc
-    return skimage.data
-
-
-@functools.cache
-def photo(name: str) -> np.ndarray:
-    """A bundled scikit-image photo as RGB uint8 (grey photos are stacked to three channels)."""
-    data = _skimage_data()
-    try:
-        if name in ("motorcycle_left", "motorcycle_right"):
-            left, right, _ = data.stereo_motorcycle()
-            img = left if name == "motorcycle_left" else right
-        else:
-            img = getattr(data, name)()
-    except Exception as exc:  # a photo that is not bundled is fetched over the network and fails offline
-        raise RealSetError(f"scikit-image photo {name!r} cannot be loaded offline: {exc}") from exc
-    img = np.asarray(img)
-    if img.ndim == 2:
-        img = np.dstack([img] * 3)
-    return np.ascontiguousarray(img[..., :3]).astype(np.uint8)
-
-
-@dataclass(frozen=True)
-class Cutout:
-    """Where an object is in a bundled photo: a hand-set polygon (x, y) that GrabCut refines.
-
-    ``background`` is an optional polygon inside ``polygon`` known to be background (a
-    same-coloured crate behind the motorcycle that GrabCut would otherwise keep).
-    """
-
-    photo: str
-    polygon: tuple[tuple[int, int], ...]
-    grabcut: bool = True
-    background: tuple[tuple[int, int], ...] = ()
-
-
-def _ellipse(cx: int, cy: int, ax: int, ay: int, n: int = 24) -> tuple[tuple[int, int], ...]:
-    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
-    return tuple((int(round(cx + ax * np.cos(a))), int(round(cy + ay * np.sin(a)))) for a in t)
-
-
-def _rect(x0: int, y0: int, x1: int, y1: int) -> tuple[tuple[int, int], ...]:
-    return ((x0, y0), (x1, y0), (x1, y1), (x0, y1))
-
-
-CUTOUTS: dict[str, Cutout] = {
-    "cup": Cutout("coffee", _rect(75, 15, 485, 390)),
-    "motorcycle": Cutout("motorcycle_left", (
-        (92, 190), (150, 150), (330, 175), (420, 145), (470, 90), (545, 95), (585, 130), (645, 285), (692, 375),
-        (670, 455), (560, 455), (520, 405), (430, 385), (350, 440), (270, 405), (200, 405), (120, 345), (95, 250)),
-        background=((572, 150), (620, 150), (620, 255), (583, 255), (565, 205), (568, 190))),
-    "motorcycle_right": Cutout("motorcycle_right", (
-        (45, 200), (100, 150), (290, 165), (300, 115), (440, 90), (510, 110), (535, 140), (525, 190), (495, 200),
-        (500, 265), (590, 285), (630, 360), (625, 440), (560, 455), (490, 420), (420, 380), (300, 440), (250, 400),
-        (170, 400), (85, 340), (50, 260))),
-    "rocket": Cutout("rocket", ((322, 126), (329, 130), (334, 145), (334, 405), (310, 405), (310, 145), (315, 130)),
-                     grabcut=False),
-    "shuttle": Cutout("astronaut", ((398, 0), (436, 0), (440, 40), (455, 50), (458, 215), (470, 228), (455, 250),
-                                    (440, 272), (395, 272), (360, 228), (352, 215), (380, 200), (380, 60), (395, 40)),
-                      grabcut=False),
-    "patch": Cutout("astronaut", _ellipse(172, 385, 42, 42)),
-    "cat": Cutout("chelsea", _ellipse(225, 150, 215, 160), grabcut=False),
-    "helmet": Cutout("astronaut", _ellipse(392, 445, 118, 108)),
-}
 
 
 @dataclass(frozen=True)
@@ -176,60 +92,6 @@ OBJECTS: tuple[RealObject, ...] = (
 TARGETS = ("cup_red", "motorcycle_red", "rocket_falcon", "patch_purple", "cat_tabby", "helmet_black")
 
 
-def _texture(name: str, gains: tuple[float, float, float]) -> Callable[[], np.ndarray]:
-    return lambda: np.clip(photo(name).astype(np.float32) * np.array(gains, np.float32), 0, 255).astype(np.uint8)
-
-
-def _region(name: str, x0: int, y0: int, x1: int, y1: int) -> Callable[[], np.ndarray]:
-    return lambda: photo(name)[y0:y1, x0:x1]
-
-
-# Backgrounds: regions of bundled photos that hold none of the objects, and tinted grey textures.
-BACKGROUNDS: dict[str, Callable[[], np.ndarray]] = {
-    "brick": _texture("brick", (1.15, 0.8, 0.65)),
-    "grass": _texture("grass", (0.7, 1.0, 0.6)),
-    "gravel": _texture("gravel", (1.0, 0.95, 0.85)),
-    "wood": _region("coffee", 480, 0, 600, 400),
-    "garage": _region("motorcycle_left", 560, 0, 741, 240),
-    "launch_pad": _region("rocket", 0, 0, 280, 427),
-    "cameraman": _region("camera", 0, 0, 512, 512),
-}
-
-
-# ------------------------------------------------------------------ cutting out
-@functools.cache
-def cutout_rgba(name: str) -> np.ndarray:
-    """The cut-out object as RGBA cropped to its mask (alpha 0 or 255), deterministic."""
-    cut = CUTOUTS[name]
-    img = photo(cut.photo)
-    inside = np.zeros(img.shape[:2], np.uint8)
-    cv2.fillPoly(inside, [np.array(cut.polygon, np.int32)], 1)
-    if cut.background:
-        cv2.fillPoly(inside, [np.array(cut.background, np.int32)], 0)
-    if cut.grabcut:
-        # GrabCut sees the polygon's box plus a margin: its background model comes from the surroundings
-        ys, xs = np.nonzero(inside)
-        y0, y1 = max(ys.min() - GRABCUT_MARGIN, 0), min(ys.max() + 1 + GRABCUT_MARGIN, img.shape[0])
-        x0, x1 = max(xs.min() - GRABCUT_MARGIN, 0), min(xs.max() + 1 + GRABCUT_MARGIN, img.shape[1])
-        mask = np.where(inside[y0:y1, x0:x1] > 0, cv2.GC_PR_FGD, cv2.GC_BGD).astype(np.uint8)
-        cv2.setRNGSeed(0)
-        cv2.grabCut(np.ascontiguousarray(img[y0:y1, x0:x1, ::-1]), mask, None, np.zeros((1, 65)), np.zeros((1, 65)),
-                    5, cv2.GC_INIT_WITH_MASK)
-        fg = np.zeros_like(inside)
-        fg[y0:y1, x0:x1] = np.isin(mask, (cv2.GC_FGD, cv2.GC_PR_FGD))
-        # keep the largest connected piece: GrabCut leaves specks of background inside the polygon
-        n, labels, stats, _ = cv2.connectedComponentsWithStats(fg, connectivity=8)
-        if n > 1:
-            fg = (labels == 1 + int(np.argmax(stats[1:, cv2.CC_STAT_AREA]))).astype(np.uint8)
-    else:
-        fg = inside
-    ys, xs = np.nonzero(fg)
-    if not len(ys):
-        raise RealSetError(f"cutout {name!r} of photo {cut.photo!r} came out empty")
-    y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
-    return np.dstack([img[y0:y1, x0:x1], fg[y0:y1, x0:x1] * 255]).astype(np.uint8)
-
-
 def recolour(rgba: np.ndarray, hue: int = 0, tint: tuple[float, float, float] | None = None) -> np.ndarray:
     """A recoloured copy: hue rotated by ``hue`` (OpenCV units) and/or RGB gains; alpha unchanged."""
     rgb = rgba[..., :3]
@@ -238,7 +100,7 @@ def recolour(rgba: np.ndarray, hue: int = 0, tint: tuple[float, float, float] | 
         hsv[..., 0] = ((hsv[..., 0].astype(np.int32) + hue) % 180).astype(np.uint8)
         rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
     if tint is not None:
-        rgb = np.clip(rgb.astype(np.float32) * np.array(tint, np.float32), 0, 255).astype(np.uint8)
+        rgb = scale_brightness(rgb, tint)
     return np.dstack([rgb, rgba[..., 3]])
 
 
@@ -277,8 +139,7 @@ def reference_views(obj: RealObject) -> list[np.ndarray]:
     base = object_rgba(obj)
     size = float(max(base.shape[:2]))
     turned = object_rgba(obj, obj.second_view) if obj.second_view else warp_rgba(base, size, 0.0, squeeze=0.75)
-    tilted = warp_rgba(base, size * 0.9, 12.0)
-    tilted = np.dstack([(tilted[..., :3].astype(np.float32) * 0.85).astype(np.uint8), tilted[..., 3]])
+    tilted = scale_brightness(warp_rgba(base, size * 0.9, 12.0), 0.85)
     return [base, turned, tilted]
 
 
@@ -297,41 +158,16 @@ class Placement:
 
 def placed(p: Placement) -> np.ndarray:
     """The RGBA of a placement (warped, brightness applied), before it is positioned."""
-    rgba = warp_rgba(object_rgba(OBJECT_BY_ID[p.object_id]), p.size, p.angle, p.squeeze)
-    rgb = np.clip(rgba[..., :3].astype(np.float32) * p.gain, 0, 255).astype(np.uint8)
-    return np.dstack([rgb, rgba[..., 3]])
+    return scale_brightness(warp_rgba(object_rgba(OBJECT_BY_ID[p.object_id]), p.size, p.angle, p.squeeze), p.gain)
 
 
-def paste(background: np.ndarray, placements: list[Placement]) -> tuple[np.ndarray, np.ndarray]:
+def compose_frame(background: np.ndarray, placements: list[Placement]) -> tuple[np.ndarray, np.ndarray]:
     """Paste in order (later occludes earlier); mask value k+1 marks placement k's visible pixels."""
     image = background.copy()
     mask = np.zeros(background.shape[:2], np.uint16)
     for k, p in enumerate(placements):
-        rgba = placed(p)
-        h, w = rgba.shape[:2]
-        y0, x0 = max(p.y, 0), max(p.x, 0)
-        y1, x1 = min(p.y + h, image.shape[0]), min(p.x + w, image.shape[1])
-        if y1 <= y0 or x1 <= x0:
-            continue
-        sub = rgba[y0 - p.y:y1 - p.y, x0 - p.x:x1 - p.x]
-        on = sub[..., 3] > 0
-        image[y0:y1, x0:x1][on] = sub[..., :3][on]
-        mask[y0:y1, x0:x1][on] = k + 1
+        paste(image, mask, placed(p), p.x, p.y, k + 1)
     return image, mask
-
-
-def background(name: str, rng: np.random.Generator) -> np.ndarray:
-    """A random portrait crop of a background photo, resized to the frame size, maybe mirrored."""
-    img = BACKGROUNDS[name]()
-    h, w = img.shape[:2]
-    aspect = FRAME_WIDTH / FRAME_HEIGHT
-    ch = int(min(h, w / aspect) * rng.uniform(0.7, 1.0))
-    cw = int(round(ch * aspect))
-    y = int(rng.integers(0, h - ch + 1))
-    x = int(rng.integers(0, w - cw + 1))
-    out = cv2.resize(np.ascontiguousarray(img[y:y + ch, x:x + cw]), (FRAME_WIDTH, FRAME_HEIGHT),
-                     interpolation=cv2.INTER_LINEAR if ch < FRAME_HEIGHT else cv2.INTER_AREA)
-    return out[:, ::-1].copy() if rng.random() < 0.5 else out
 
 
 def _overlap(a: tuple[int, int, int, int], b: tuple[int, int, int, int]) -> float:
@@ -405,7 +241,8 @@ def episode_plan(seed: int, target: str) -> tuple[str, list[str], list[tuple[np.
     frames = []
     for kind in FRAME_KINDS:
         ids = frame_objects(kind, target, lookalike, others, rng)
-        bg = background(bg_names[int(rng.integers(len(bg_names)))], rng)
+        photo = BACKGROUNDS[bg_names[int(rng.integers(len(bg_names)))]]()
+        bg = room_crop(photo, rng, zoom=float(rng.uniform(0.7, 1.0)))
         frames.append((bg, plan_frame(ids, rng)))
     return lookalike, others, frames
 
@@ -442,7 +279,7 @@ def build(out: str | Path, *, seed: int = DEFAULT_SEED, targets: tuple[str, ...]
             writer.add_episode(episode_id, "val", f"real_scene_{target}", target, [lookalike, *others])
             roles = writer.roles(episode_id)
             for step, (bg, placements) in enumerate(frames):
-                image, mask = paste(bg, placements)
+                image, mask = compose_frame(bg, placements)
                 writer.add_frame(episode_id, step, camera_noise(image, seed, episode_id, step), mask,
                                  {k + 1: (p.object_id, roles[p.object_id]) for k, p in enumerate(placements)})
         return writer.close()

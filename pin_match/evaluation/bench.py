@@ -17,7 +17,7 @@ import pandas as pd
 
 from pin_match import atomic, outputs
 from pin_match.contract.registry import get_matcher_class
-from pin_match.data.frameset import FrameSet
+from pin_match.data.frameset import MANIFEST, FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma
@@ -147,7 +147,7 @@ def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS,
 
 
 def _load_or_make(path: Path, watch: Stopwatch, what: str, make) -> FrameSet:
-    if (path / "frameset.json").exists():
+    if (path / MANIFEST).exists():
         with watch.step(f"load {path.parent.name}/{path.name}"):
             return FrameSet.load(path)
     with watch.step(what):

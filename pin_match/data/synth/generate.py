@@ -15,15 +15,16 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.frameset import FrameSet
 from pin_match.data.synth.builders import build
-from pin_match.data.synth.objects import CATEGORIES, ObjectSpec, SynthError, make_objects, stable_seed
+from pin_match.data.synth.objects import CATEGORIES, ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
 from pin_match.data.synth.scene import make_room, place_objects
 from pin_match.data.synth.walk import CAMERA_HEIGHT, camera_walk
 from pin_match.data.writer import FrameRecord, FrameSetWriter, encode_frame
 
-FRAME_HEIGHT, FRAME_WIDTH, HFOV = 640, 360, 42.0
+HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
 DEFAULTS = dict(seed=0, episodes=24, objects_per_category=10, frames_per_episode=32)
 GENERATOR_VERSION = 1
 

@@ -8,11 +8,11 @@ share the same attribute key, so their descriptions always tell them apart.
 
 from __future__ import annotations
 
-import zlib
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from pin_match.data.compose import stable_seed
 from pin_match.data.synth.textures import DECALS, WORDS
 from pin_match.errors import PinMatchError
 
@@ -118,11 +118,6 @@ class ObjectSpec:
     look: Look
     geometry_seed: int
     descriptions: tuple[str, ...] = field(default=())
-
-
-def stable_seed(*parts: object) -> int:
-    """A seed from names and numbers that does not depend on Python's hash randomisation."""
-    return zlib.crc32("/".join(str(p) for p in parts).encode()) & 0x7FFFFFFF
 
 
 def sample_look(cat: Category, rng: np.random.Generator, taken: set[tuple]) -> Look:
