@@ -4,11 +4,11 @@ Figures (docs/performance.md):
 - frames/s of ``pin-match score`` on the 72 real-photo frames at the default config (decode,
   two PIN crops per frame, prepare per episode, match, write the table), 1 and 2 worker threads;
 - per config (the default, ``layer=head img_size=448``, and ``layer=blocks.3 img_size=224``): frames/s of
-  the bare network (the trunk's forward pass alone on the frames' crops, already squashed, normalised and
-  channels-last, one frame's two crops per pass) and of ``matcher.match`` on the same frames
-  (which adds cropping, resizing, normalising, the cosine max and the result), measured side
-  by side, interleaved, and their ratio. Target: matcher / bare >= 0.9. A third side, the same network
-  and crops in NCHW memory format, gives what channels-last buys.
+  the bare network (``feature_map``: the trunk's forward pass alone, channels-last, on the frames' crops
+  already put through the backbone's own ``network_input``, one frame's two crops per pass) and of
+  ``matcher.match`` on the same frames (which adds cropping, resizing, normalising, the cosine max and the
+  result), measured side by side, interleaved, and their ratio. Target: matcher / bare >= 0.9. A third
+  side, the same network and crops in NCHW memory format, gives what channels-last buys.
 
 ``python -m benchmarks.bench_effnet [--quick]``.
 """
@@ -16,19 +16,25 @@ Figures (docs/performance.md):
 from __future__ import annotations
 
 import copy
-import tempfile
-import time
 
+import numpy as np
 import torch
 
 from benchmarks.framesets import real_photos
+from benchmarks.timing import fastest, timed_score
 from pin_match import create_matcher
 from pin_match.contract.crops import crop_boxes
-from pin_match.matchers.backbones import squash_batch
-from pin_match.scoring import score
+from pin_match.matchers.backbones import network_input
 
 CONFIGS = {"default (head, 448 px)": {}, "layer=blocks.3 img_size=224": {"layer": "blocks.3", "img_size": 224}}
 TARGET_RATIO = 0.9
+
+
+def network_inputs(matcher, images: list[np.ndarray]) -> list[torch.Tensor]:
+    """Per frame, the batch ``matcher.match`` runs its network on: the frame's crops by the matcher's policy, through
+    the backbone's own preprocessing (``network_input``, which ``encode`` calls), one forward pass per frame."""
+    return [network_input(matcher.backbone, [c.take(im) for c in crop_boxes(*im.shape[:2], matcher.cfg.crops)])
+            for im in images]
 
 
 def side_by_side(fs, overrides: dict, n_frames: int, repeats: int) -> dict:
@@ -38,39 +44,19 @@ def side_by_side(fs, overrides: dict, n_frames: int, repeats: int) -> dict:
     matcher.prepare(fs.target(episode.target_object_id))
     images = [fs.image(f) for f in fs.frames.frame_id[:n_frames]]
     bb = matcher.backbone
-    batches = []
-    for im in images:  # one frame's crops per forward pass, as match() runs them
-        crops = [c.take(im) for c in crop_boxes(*im.shape[:2], matcher.cfg.crops)]
-        x = squash_batch(crops, bb.input_size, bb.mean, bb.std, bb.interpolation)
-        batches.append(x.contiguous(memory_format=torch.channels_last))
+    batches = network_inputs(matcher, images)
     nchw_trunk = copy.deepcopy(bb.trunk).to(memory_format=torch.contiguous_format)
     nchw_batches = [x.contiguous() for x in batches]
-    matcher.match(images[0])  # warm-up, every side
-    bb.feature_map(batches[0])
-
-    def bare() -> None:
-        for x in batches:
-            bb.feature_map(x)
 
     @torch.inference_mode()
     def bare_nchw() -> None:
         for x in nchw_batches:
             nchw_trunk(x)
 
-    bare_nchw()
-
-    def full() -> None:
-        for im in images:
-            matcher.match(im)
-
-    # interleaved, fastest of each: other load only ever adds time, and alternating keeps a burst
-    # of it from landing on one side only
-    best = {"bare": float("inf"), "matcher": float("inf"), "bare_nchw": float("inf")}
-    for _ in range(repeats):
-        for side, fn in (("bare", bare), ("matcher", full), ("bare_nchw", bare_nchw)):
-            t0 = time.perf_counter()
-            fn()
-            best[side] = min(best[side], time.perf_counter() - t0)
+    sides = {"bare": lambda: [bb.feature_map(x) for x in batches],
+             "matcher": lambda: [matcher.match(im) for im in images], "bare_nchw": bare_nchw}
+    fastest(sides)  # warm-up, every side
+    best = {side: t.wall_s for side, t in fastest(sides, repeats).items()}
     return dict(config=str(matcher.cfg), frames=n_frames, repeats=repeats,
                 bare_fps=round(n_frames / best["bare"], 2), matcher_fps=round(n_frames / best["matcher"], 2),
                 ratio=round(best["bare"] / best["matcher"], 3), bare_nchw_fps=round(n_frames / best["bare_nchw"], 2),
@@ -83,10 +69,7 @@ def run(quick: bool = False) -> dict:
     print(f"pin-match score, effnet default, {len(fs.frames)} real-photo frames")
     print(f"{'workers':>7s} {'frames':>6s} {'seconds':>8s} {'frames/s':>9s}")
     for workers in (1,) if quick else (1, 2):
-        with tempfile.TemporaryDirectory() as tmp:
-            t0 = time.perf_counter()
-            table = score(fs, "effnet", out=tmp, workers=workers, progress=False)
-            dt = time.perf_counter() - t0
+        table, dt = timed_score(fs, "effnet", workers)
         out[f"score_workers{workers}_fps"] = round(len(table.frames) / dt, 2)
         print(f"{workers:7d} {len(table.frames):6d} {dt:8.2f} {len(table.frames) / dt:9.2f}")
     print(f"\nbare network vs matcher.match, side by side (target matcher/bare >= {TARGET_RATIO}):")

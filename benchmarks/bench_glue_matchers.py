@@ -24,6 +24,7 @@ import cv2
 import numpy as np
 import torch
 
+from benchmarks.timing import time_frames
 from pin_match import Target, create_matcher
 
 EPISODE_FRAMES = 32
@@ -76,16 +77,8 @@ def time_one(name: str, overrides: dict, target: Target, frames: list[np.ndarray
     matcher = create_matcher(name, **overrides)
     matcher.prepare(target)  # loads the models: not part of reference preparation
     clock = StageClock(matcher, {"detection": "_extract", "matching": "_pair"})
-    start = time.perf_counter()
-    matcher.prepare(target)
-    prepare_s = time.perf_counter() - start
-    matcher.match(frames[0])
-    clock.reset()
-    wall, cpu = time.perf_counter(), time.process_time()
-    for frame in frames[1:]:
-        matcher.match(frame)
-    n = len(frames) - 1
-    wall_s, cpu_s = (time.perf_counter() - wall) / n, (time.process_time() - cpu) / n
+    timing = time_frames(matcher, target, frames, after_warmup=clock.reset)
+    prepare_s, wall_s, cpu_s, n = timing.prepare_s, timing.per_frame.wall_s, timing.per_frame.cpu_s, timing.frames
     per_frame = {stage: s / n for stage, s in clock.seconds.items()}
     per_frame["other"] = max(0.0, wall_s - sum(per_frame.values()))
     episode_s = prepare_s + EPISODE_FRAMES * wall_s

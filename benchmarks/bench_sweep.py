@@ -7,11 +7,10 @@ of its iterations costs the same full pass over the frames; the result says so.
 
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import pandas as pd
 
+from benchmarks.timing import fastest, once
 from pin_match.evaluation.metrics import frame_arrays
 from pin_match.evaluation.sweep import sweep, sweep_loop
 
@@ -35,27 +34,22 @@ def run(quick: bool = False) -> dict:
     n_frames, n_episodes, n_loop = (100_000, 3_000, 5) if quick else (1_000_000, 30_000, 10)
     df = synthetic_scored(n_frames, n_episodes)
     sweep(df.iloc[:1000])  # warm-up: imports and first-call overheads
-    times = []
-    for _ in range(3):
-        t0 = time.perf_counter()
-        curve = sweep(df)
-        times.append(time.perf_counter() - t0)
-    t0 = time.perf_counter()
-    arr = frame_arrays(df)
-    t_prepare = time.perf_counter() - t0
+    got: dict = {}  # what the timed calls return
+    t_sweep = fastest({"sweep": lambda: got.update(curve=sweep(df))}, repeats=3)["sweep"].wall_s
+    t_prepare = once(lambda: got.update(arrays=frame_arrays(df))).wall_s
+    curve = got["curve"]
     sample = curve["sigma"].to_numpy()[np.linspace(0, len(curve) - 1, n_loop).astype(int)]
-    t0 = time.perf_counter()
-    loop = sweep_loop(arr, sample)
-    t_loop = time.perf_counter() - t0
+    t_loop = once(lambda: got.update(loop=sweep_loop(got["arrays"], sample))).wall_s
+    loop = got["loop"]
     same = curve.set_index("sigma").loc[sample].reset_index()
     pd.testing.assert_frame_equal(same, loop, check_exact=True, check_dtype=False)
     per_threshold = t_loop / n_loop
     extrapolated = per_threshold * len(curve) + t_prepare
-    result = dict(n_frames=n_frames, n_episodes=n_episodes, n_thresholds=len(curve), sweep_s=min(times),
-                  sweep_runs_s=times, loop_thresholds_timed=n_loop, loop_per_threshold_s=per_threshold,
-                  loop_all_thresholds_s_extrapolated=extrapolated, ratio_extrapolated=extrapolated / min(times))
+    result = dict(n_frames=n_frames, n_episodes=n_episodes, n_thresholds=len(curve), sweep_s=t_sweep,
+                  loop_thresholds_timed=n_loop, loop_per_threshold_s=per_threshold,
+                  loop_all_thresholds_s_extrapolated=extrapolated, ratio_extrapolated=extrapolated / t_sweep)
     print(f"sweep: {n_frames:,} frames, {n_episodes:,} episodes, {len(curve):,} distinct sigmas: "
-          f"{min(times):.3f} s (best of 3: {', '.join(f'{t:.3f}' for t in times)})")
+          f"{t_sweep:.3f} s (best of 3)")
     print(f"per-threshold loop: {per_threshold * 1000:.1f} ms per sigma (timed on {n_loop}, equal to the sweep there); "
           f"all {len(curve):,} sigmas extrapolated: {extrapolated:,.0f} s = {result['ratio_extrapolated']:,.0f}x "
           f"the sweep")

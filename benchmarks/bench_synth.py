@@ -10,8 +10,9 @@ from __future__ import annotations
 import argparse
 import json
 import tempfile
-import time
 from pathlib import Path
+
+from benchmarks.timing import once
 
 
 def _time_frames(n: int) -> float:
@@ -27,9 +28,7 @@ def _time_frames(n: int) -> float:
         plan = EpisodePlan(episode_id, split, scene_id, stable_seed(0, "scene", scene_id),
                            stable_seed(0, "episode", episode_id), tuple(objs), roles, n, tmp)
         render_episode(plan)  # warm-up: first pybullet connection
-        t0 = time.perf_counter()
-        render_episode(plan)
-        return (time.perf_counter() - t0) / n
+        return once(lambda: render_episode(plan)).wall_s / n
 
 
 def _time_references(n: int) -> float:
@@ -38,19 +37,16 @@ def _time_references(n: int) -> float:
 
     specs = make_objects(0, 2)[::2][:n]
     render_object(specs[0])
-    t0 = time.perf_counter()
-    for s in specs:
-        render_object(s)
-    return (time.perf_counter() - t0) / len(specs)
+    return once(lambda: [render_object(s) for s in specs]).wall_s / len(specs)
 
 
 def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:
     from pin_match.data.synth import generate
 
+    got: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        t0 = time.perf_counter()
-        fs = generate(Path(tmp) / "fs", workers=workers, **settings)
-        return time.perf_counter() - t0, fs.fingerprint, len(fs.frames)
+        seconds = once(lambda: got.update(fs=generate(Path(tmp) / "fs", workers=workers, **settings))).wall_s
+        return seconds, got["fs"].fingerprint, len(got["fs"].frames)
 
 
 def run(quick: bool) -> dict:

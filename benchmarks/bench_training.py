@@ -13,13 +13,12 @@ val, CM at the tuned sigma at most half the frozen matcher's, training <= 10 min
 
 from __future__ import annotations
 
-import time
 from pathlib import Path
 
 import torch
 
-from benchmarks.framesets import CACHE
-from pin_match.data.frameset import MANIFEST
+from benchmarks.framesets import CACHE, real_photos, synthetic
+from benchmarks.timing import once
 
 # the training frame-set: twice the demo's episodes, so the train split has 24 episodes (768 frames)
 SYNTH = dict(seed=0, episodes=48, objects_per_category=10, frames_per_episode=32)
@@ -30,28 +29,12 @@ THREADS = 1  # one torch thread: on a shared 2-core machine two threads oversubs
 BACKBONE_CFG = {"effnet": dict(img_size=320, layer="blocks.4")}
 
 
-def _frameset(quick: bool):
-    from pin_match.data.frameset import FrameSet
-    from pin_match.data.synth import generate
-
-    sizes = QUICK if quick else SYNTH
-    root = CACHE / ("training_quick" if quick else "training_synth{episodes}".format(**sizes))
-    if (root / MANIFEST).exists():
-        return FrameSet.load(root)
-    return generate(root, overwrite=True, **sizes)
-
-
 def _real_frameset():
+    """The real-photo set, or None where its builder's optional dependency (scikit-image) is missing."""
     try:
-        from pin_match.data.realset import build
+        return real_photos()
     except ImportError:
         return None
-    root = CACHE / "realset"
-    if (root / MANIFEST).exists():
-        from pin_match.data.frameset import FrameSet
-
-        return FrameSet.load(root)
-    return build(root, seed=0)
 
 
 def _row(name: str, result: dict) -> dict:
@@ -84,25 +67,27 @@ def run(quick: bool = False) -> dict:
     backbone = default_backbone()
     overrides = dict(BACKBONE_CFG.get(backbone, {}))
     features = CACHE / "features"
-    fs = _frameset(quick)
+    fs = synthetic("training_quick", **QUICK) if quick else synthetic(f"training_synth{SYNTH['episodes']}", **SYNTH)
 
-    t0 = time.perf_counter()
-    store = build_features(fs, backbone, overrides=overrides, out=features, progress=False)
+    got: dict = {}  # what the timed calls return
+    build_s = once(lambda: got.update(store=build_features(fs, backbone, overrides=overrides, out=features,
+                                                           progress=False))).wall_s
+    store = got["store"]
     size_mb = sum(p.stat().st_size for p in Path(store.root).iterdir()) / 2**20
     meta = store.meta
     extraction = dict(frames=meta["n_frames"], crops=meta["n_crops"], frames_per_second=meta["frames_per_second"],
                       seconds_frames=meta["seconds_frames"], seconds_references=meta["seconds_references"],
                       objects=len(store.objects), store_mb=round(size_mb, 1),
-                      cached=time.perf_counter() - t0 < 0.5 * meta["seconds_frames"])
+                      cached=build_s < 0.5 * meta["seconds_frames"])
     print(f"features {store.backbone_id}: {meta['n_frames']} frames ({meta['n_crops']} crops) at "
           f"{meta['frames_per_second']:.3g} frames/s when built, references {meta['seconds_references']} s, "
           f"{extraction['store_mb']} MB")
 
     cfg = TrainConfig(epochs=3, hidden=32, threads=THREADS) if quick else TrainConfig(threads=THREADS)
     head_dir = CACHE / "heads" / f"{backbone}{'_quick' if quick else ''}"
-    t1 = time.perf_counter()
-    config = train(fs, head_dir, backbone=backbone, overrides=overrides, store=store, cfg=cfg, progress=False)
-    wall = time.perf_counter() - t1
+    wall = once(lambda: got.update(config=train(fs, head_dir, backbone=backbone, overrides=overrides, store=store,
+                                                cfg=cfg, progress=False))).wall_s
+    config = got["config"]
     train_seconds = round(sum(h["seconds"] for h in config["history"]), 1)
     print(f"training: {config['epochs_run']} epochs ({train_seconds} s in epochs, this call {wall:.1f} s, "
           f"{THREADS} thread), best epoch {config['best_epoch']}, held-out AUROC "

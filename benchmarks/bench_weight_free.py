@@ -6,23 +6,17 @@ match, write the table) on the synthetic frame-set, with a fresh cache each run.
 
 from __future__ import annotations
 
-import tempfile
-import time
-
 from benchmarks.framesets import synthetic
-from pin_match.scoring import score
+from benchmarks.timing import timed_score
 
 
 def run(quick: bool = False) -> dict:
-    fs = synthetic(4 if quick else 24, "synth_quick" if quick else "synth_default")
+    fs = synthetic("synth_quick", seed=0, episodes=4) if quick else synthetic("synth_default", seed=0, episodes=24)
     out = {}
     print(f"{'matcher':10s} {'workers':>7s} {'frames':>6s} {'seconds':>8s} {'frames/s':>9s}")
     for name in ("sift", "color"):
         for workers in (1, 2):
-            with tempfile.TemporaryDirectory() as tmp:
-                t0 = time.perf_counter()
-                table = score(fs, name, out=tmp, workers=workers, progress=False)
-                dt = time.perf_counter() - t0
+            table, dt = timed_score(fs, name, workers)
             fps = len(table.frames) / dt
             out[f"{name}_workers{workers}_fps"] = fps
             print(f"{name:10s} {workers:7d} {len(table.frames):6d} {dt:8.2f} {fps:9.1f}")

@@ -1,7 +1,8 @@
-"""Frame-sets for benchmarks: the synthetic default, or a fast procedural one of any size."""
+"""Frame-sets for benchmarks, each built once by the library's own builders and loaded from its cache folder after."""
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -12,28 +13,27 @@ from pin_match.data.writer import FrameSetWriter
 CACHE = Path("pin_match_runs") / "benchmarks"
 
 
-def synthetic(episodes: int, name: str) -> FrameSet:
-    """A cached synthetic frame-set with ``episodes`` episodes (generated on first use).
-
-    The default size is the demo's own frame-set, reused when ``pin-match demo`` made it.
-    """
-    from pin_match.data.synth import DEFAULTS, generate
-    from pin_match.evaluation.bench import DEMO_OUT
-
-    if episodes == DEFAULTS["episodes"] and (DEMO_OUT / "frameset" / MANIFEST).exists():
-        return FrameSet.load(DEMO_OUT / "frameset")
-    root = CACHE / name
+def cached(root: Path, build: Callable[[Path], FrameSet]) -> FrameSet:
+    """The frame-set at ``root``, built there by ``build(root)`` when it has none yet: every benchmark's one way in."""
     if (root / MANIFEST).exists():
         return FrameSet.load(root)
-    return generate(root, seed=0, episodes=episodes, overwrite=True)
+    return build(root)
+
+
+def synthetic(name: str, **settings) -> FrameSet:
+    """A cached synthetic frame-set from ``pin-match generate``'s builder; ``settings`` are its keywords."""
+    from pin_match.data.synth import generate
+
+    return cached(CACHE / name, lambda root: generate(root, overwrite=True, **settings))
 
 
 def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:
     """Many cheap frames (coloured rectangles, one of them the target) for memory and throughput scaling."""
-    root = CACHE / (f"procedural_{n_frames}" if frames_per_episode == 100 else
-                    f"procedural_{n_frames}_per{frames_per_episode}")
-    if (root / MANIFEST).exists():
-        return FrameSet.load(root)
+    name = f"procedural_{n_frames}" if frames_per_episode == 100 else f"procedural_{n_frames}_per{frames_per_episode}"
+    return cached(CACHE / name, lambda root: _write_procedural(root, n_frames, frames_per_episode, seed))
+
+
+def _write_procedural(root: Path, n_frames: int, frames_per_episode: int, seed: int) -> FrameSet:
     rng = np.random.default_rng(seed)
     w = FrameSetWriter(root, root.name, overwrite=True)
     view = np.zeros((96, 96, 4), np.uint8)
@@ -58,7 +58,5 @@ def real_photos(seed: int = 0) -> FrameSet:
     """The real-photo frame-set (``pin-match realset``; needs scikit-image), cached per seed."""
     from pin_match.data.realset import build
 
-    root = CACHE / ("realset" if seed == 0 else f"realset_seed{seed}")
-    if (root / MANIFEST).exists():
-        return FrameSet.load(root)
-    return build(root, seed=seed, overwrite=True)
+    name = "realset" if seed == 0 else f"realset_seed{seed}"
+    return cached(CACHE / name, lambda root: build(root, seed=seed, overwrite=True))

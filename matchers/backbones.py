@@ -79,6 +79,17 @@ def squash_batch(images: Sequence[np.ndarray], size: int, mean: Sequence[float],
     return out.mul_(scale).add_(shift)
 
 
+def network_input(backbone: TimmBackbone | OpenClipBackbone | FeatureMapBackbone,
+                  images: Sequence[np.ndarray]) -> torch.Tensor:
+    """The batch a backbone's network runs on: ``images`` squashed to its input, normalised with its constants.
+
+    Every adapter's ``encode`` starts here, and the benchmarks time the bare network on what
+    this returns, so the matcher and the bare side do the same preprocessing by construction.
+    """
+    return squash_batch(images, backbone.input_size, backbone.mean, backbone.std,
+                        backbone.interpolation).to(backbone.device)
+
+
 def _checkpoint_in(path: Path, names: Sequence[str]) -> Path:
     if path.is_file():
         return path
@@ -128,7 +139,7 @@ class TimmBackbone:
 
     @torch.inference_mode()
     def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
-        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
+        x = network_input(self, images)
         tokens = self.model.forward_features(x)
         cls = self.model.forward_head(tokens, pre_logits=True)
         return PatchFeatures(cls=cls.float().cpu(), patches=tokens[:, self.num_prefix_tokens:].float().cpu())
@@ -166,7 +177,7 @@ class OpenClipBackbone:
 
     @torch.inference_mode()
     def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
-        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
+        x = network_input(self, images)
         visual = self.model.visual
         out = visual.forward_intermediates(x, indices=1, normalize_intermediates=True, output_fmt="NLC")
         patches = out["image_intermediates"][-1] @ visual.proj
@@ -236,8 +247,7 @@ class FeatureMapBackbone:
 
     @torch.inference_mode()
     def encode(self, images: Sequence[np.ndarray]) -> PatchFeatures:
-        x = squash_batch(images, self.input_size, self.mean, self.std, self.interpolation).to(self.device)
-        fmap = self.feature_map(x).float()
+        fmap = self.feature_map(network_input(self, images)).float()
         if fmap.shape[-2:] != (self.grid, self.grid):
             raise ValueError(f"feature map {tuple(fmap.shape[-2:])} is not the expected {self.grid} x {self.grid}")
         return PatchFeatures(cls=fmap.mean((2, 3)).cpu(), patches=fmap.flatten(2).transpose(1, 2).cpu())

@@ -46,7 +46,7 @@ from pin_match.matchers.backbones import (
     TimmBackbone,
     resolve_checkpoint,
 )
-from pin_match.nn.prototypes import masked_mean
+from pin_match.nn.prototypes import masked_mean, patch_scores
 
 # ------------------------------------------------------------------------------------------ math
 
@@ -63,12 +63,6 @@ def alpha_to_grid(alpha: np.ndarray, grid: int) -> torch.Tensor:
     if float(weights.sum()) <= 0.0:
         weights = F.adaptive_avg_pool2d(a, (grid, grid))[0, 0]
     return weights
-
-
-def patch_similarity(patches: torch.Tensor, targets: torch.Tensor) -> torch.Tensor:
-    """Per patch, the max over targets of the cosine similarity; (B, N, D), (T, D) -> (B, N)."""
-    sims = F.normalize(patches, dim=-1) @ F.normalize(targets, dim=-1).T
-    return sims.amax(dim=-1)
 
 
 @functools.lru_cache(maxsize=64)
@@ -182,7 +176,7 @@ class PatchSimilarityMatcher(CropMatcher):
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
         backbone = self.backbone
         feats = backbone.encode(crops).patches
-        scores = patch_similarity(feats, self.targets).numpy().astype(np.float32)
+        scores = patch_scores(feats, self.targets).numpy().astype(np.float32)
         grid = backbone.grid
         results = []
         for crop, s in zip(crops, scores):

@@ -7,6 +7,7 @@ import sys
 import types
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # benchmarks/ is a folder of the repository, not installed
@@ -60,3 +61,61 @@ def test_a_quiet_machine_writes_json(fake_runs, tmp_path):
     fake_runs[:] = [0.1, 0.1, 0.2]
     assert runner.main(["--only", "bench_sweep", "--json", str(out)]) == 0
     assert json.loads(out.read_text())["noisy"] is False
+
+
+def test_a_cached_frameset_is_built_once_then_loaded(tmp_path):
+    from benchmarks.framesets import _write_procedural, cached
+
+    builds = []
+
+    def build(root):
+        builds.append(root)
+        return _write_procedural(root, n_frames=2, frames_per_episode=2, seed=0)
+
+    first = cached(tmp_path / "p", build)
+    again = cached(tmp_path / "p", build)
+    assert builds == [tmp_path / "p"] and len(again.frames) == 2
+    assert again.fingerprint == first.fingerprint
+
+
+def test_fastest_interleaves_the_sides_and_keeps_each_ones_fastest_run(monkeypatch):
+    from benchmarks import timing
+
+    clock, calls = [0.0], []
+    monkeypatch.setattr(timing, "time", types.SimpleNamespace(perf_counter=lambda: clock[0],
+                                                              process_time=lambda: clock[0] / 2))
+    durations = {"a": [3.0, 1.0, 2.0], "b": [1.0, 5.0, 4.0]}
+
+    def side(name):
+        def run():
+            calls.append(name)
+            clock[0] += durations[name][sum(c == name for c in calls) - 1]
+        return run
+
+    best = timing.fastest({"a": side("a"), "b": side("b")}, repeats=3)
+    assert calls == ["a", "b"] * 3
+    assert best == {"a": timing.Timing(1.0, 0.5), "b": timing.Timing(1.0, 0.5)}
+
+
+def test_the_bare_network_side_runs_on_exactly_the_matchers_input(monkeypatch):
+    """bench_effnet's bare side and ``matcher.match`` feed the trunk the same batches, whatever the preprocessing."""
+    import torch
+
+    from benchmarks.bench_effnet import network_inputs
+    from pin_match import Target, create_matcher
+
+    monkeypatch.setenv("HF_HUB_OFFLINE", "1")
+    matcher = create_matcher("effnet", layer="blocks.3", img_size=64)
+    view = np.full((48, 48, 4), 255, np.uint8)
+    matcher.prepare(Target("box", "toy", (view, view, view), ("a", "b", "c")))
+    rng = np.random.default_rng(0)
+    images = [rng.integers(0, 256, (640, 360, 3), dtype=np.uint8) for _ in range(2)]
+    bb, fed = matcher.backbone, []
+    feature_map = bb.feature_map
+    monkeypatch.setattr(bb, "feature_map", lambda x: fed.append(x.clone()) or feature_map(x))
+    for image in images:
+        matcher.match(image)
+    bare = network_inputs(matcher, images)
+    assert len(fed) == len(bare) == 2 and fed[0].shape[0] == 2  # one frame's two PIN crops per pass
+    for matched, prepared in zip(fed, bare):
+        assert torch.equal(matched, prepared)

@@ -23,6 +23,7 @@ from pin_match.matchers.patch import (
     alpha_to_grid,
     patch_centres,
 )
+from pin_match.nn.prototypes import patch_scores
 
 ROOT = Path(__file__).resolve().parents[1]
 NAMES = ("dino", "dinov2", "clip", "clip-text")
@@ -153,6 +154,18 @@ def test_max_over_references_takes_the_closest_view():
     per_view = [cosine_max(np.array([[20, 240, 20.0]]), PROTOTYPES[k:k + 1])[0] for k in range(3)]
     assert np.argmax(per_view) == 1
     assert r.point_scores[6] == pytest.approx(max(per_view), rel=1e-5)
+
+
+def test_several_targets_score_as_each_alone():
+    """Training scores every query object in one call (Q, V, D); the matcher one target (V, D): the same numbers."""
+    torch.manual_seed(0)
+    patches, targets = torch.randn(3, 5, 8), torch.randn(2, 4, 8)
+    together = patch_scores(patches, targets)
+    assert together.shape == (3, 5, 2)
+    for q in range(2):
+        assert torch.equal(together[..., q], patch_scores(patches, targets[q]))
+    cosines = torch.nn.functional.cosine_similarity(patches[:, :, None], targets[1][None, None], dim=-1)
+    torch.testing.assert_close(together[..., 1], cosines.amax(-1))
 
 
 def test_points_at_sigma_keeps_the_patches_above_it():

@@ -156,6 +156,16 @@ def test_the_learned_matcher_scores_like_the_store(head_dir, store, tiny_framese
     (head_dir / "notes.txt").unlink()
 
 
+def test_the_frozen_matcher_scores_like_the_store(store, tiny_frameset, dino_cfg, tmp_path):
+    """Training's comparison scores frames by the matcher's own rule: the store's frozen scores are the matcher's."""
+    table = score(tiny_frameset, "dino", overrides=dino_cfg, split="val", out=tmp_path, progress=False)
+    expected = store_frame_scores(store, tiny_frameset, None, "val").set_index("frame_id").score
+    got = table.frames.set_index("frame_id").score
+    assert len(expected) == len(got) > 1 and expected.nunique() > 1
+    # the store keeps tokens in float16 (the scoring path runs in float32): the two agree to float16 precision
+    np.testing.assert_allclose(got[expected.index].to_numpy(), expected.to_numpy(), atol=2e-3)
+
+
 def test_a_head_on_changed_backbone_weights_is_refused(head_dir, tmp_path):
     import shutil
 

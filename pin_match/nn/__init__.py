@@ -9,7 +9,7 @@ from pin_match.nn.head import (
     read_head_config,
     save_head,
 )
-from pin_match.nn.prototypes import masked_mean
+from pin_match.nn.prototypes import masked_mean, patch_scores
 
-__all__ = ["HeadBackbone", "HeadError", "ProjectionHead", "load_head", "masked_mean", "prototypes",
-           "read_head_config", "save_head"]
+__all__ = ["HeadBackbone", "HeadError", "ProjectionHead", "load_head", "masked_mean", "patch_scores",
+           "prototypes", "read_head_config", "save_head"]

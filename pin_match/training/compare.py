@@ -9,11 +9,11 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 import torch
-import torch.nn.functional as F
 
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.metrics import auroc
 from pin_match.nn.head import prototypes
+from pin_match.nn.prototypes import patch_scores
 from pin_match.training.config import TrainingError
 from pin_match.training.data import TrainData
 from pin_match.training.features import FeatureStore
@@ -22,7 +22,7 @@ from pin_match.training.features import FeatureStore
 @torch.inference_mode()
 def store_crop_scores(store: FeatureStore, head: torch.nn.Module | None, crop_idx: np.ndarray,
                       objects: list[int], chunk: int = 64) -> np.ndarray:
-    """(len(crop_idx), len(objects)) crop scores: max over patches of max over views of the cosine to the prototypes.
+    """(len(crop_idx), len(objects)) crop scores by the matcher's own rule (``patch_scores``), max over patches.
 
     With ``head=None`` this is the frozen prototype matcher's score, from the stored tokens.
     """
@@ -33,8 +33,8 @@ def store_crop_scores(store: FeatureStore, head: torch.nn.Module | None, crop_id
     out = np.empty((len(crop_idx), len(objects)), np.float32)
     for start in range(0, len(crop_idx), chunk):
         idx = crop_idx[start:start + chunk]
-        z = F.normalize(head(torch.from_numpy(np.asarray(store.frames[idx], np.float32))), dim=-1)
-        out[start:start + len(idx)] = torch.einsum("bpd,qvd->bpqv", z, protos).amax(-1).amax(1).numpy()
+        tokens = head(torch.from_numpy(np.asarray(store.frames[idx], np.float32)))
+        out[start:start + len(idx)] = patch_scores(tokens, protos).amax(1).numpy()
     return out
 
 

@@ -7,6 +7,7 @@ import torch
 import torch.nn.functional as F
 
 from pin_match.nn.head import ProjectionHead, prototypes
+from pin_match.nn.prototypes import patch_scores
 from pin_match.training.config import TrainConfig
 from pin_match.training.data import TrainData
 
@@ -23,8 +24,7 @@ def batch_loss(head: ProjectionHead, scale: torch.Tensor, bias: torch.Tensor, da
     refs = torch.from_numpy(np.asarray(store.refs[query], np.float32))                   # (Q, V, P, D)
     alpha = torch.from_numpy(np.asarray(store.ref_alpha[query], np.float32))             # (Q, V, P)
 
-    z = F.normalize(head(tokens), dim=-1)
-    sims = torch.einsum("bpd,qvd->bpqv", z, prototypes(head, refs, alpha)).amax(-1)      # (B, P, Q)
+    sims = patch_scores(head(tokens), prototypes(head, refs, alpha))                     # (B, P, Q)
     logits = scale * (sims - bias)
 
     on_held = torch.isin(obj, torch.tensor(sorted(data.holdout_objects), dtype=torch.int64))
