@@ -184,8 +184,8 @@ class FeatureMapBackbone:
     Only the modules up to the layer are kept and run, so a stride-16 layer costs the early
     stages only. The global vector is the feature map's mean over cells (the network's own
     pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
-    channels-last: on a CPU EfficientNet-Lite0's convolutions ran 1.13x (blocks.3 at 224) to 1.36x
-    (head at 448) faster than NCHW side by side (``benchmarks/bench_effnet.py``), features equal up to rounding.
+    channels-last: CPU convolutions run faster in that layout, with features equal up to rounding
+    (docs/performance.md).
     """
 
     def __init__(self, trunk: torch.nn.Sequential, normalisation: tuple[Sequence[float], Sequence[float], str],

@@ -71,7 +71,7 @@ class ClipGradMatcher(CropMatcher):
     default_sigma = 0.85
     weights_spec = WEIGHTS
     paper = "CLIP on Wheels (Gadre et al., CVPR 2023), relevance after Chefer et al. (ICCV 2021)"
-    version = 2  # 2: score from the upsampled map CoW thresholds (was: the 7 x 7 grid)
+    version = 2  # what each version changed: docs/baselines.md
 
     def __init__(self, cfg: ClipGradConfig | None = None) -> None:
         super().__init__(cfg)

@@ -174,7 +174,7 @@ class OwlMatcher(OwlBase):
 
     Config = OwlConfig
     modality = Modality.TEXTUAL
-    version = 2  # 2: the description alone by default (was: the 80-template average), truncation warned
+    version = 2  # what each version changed: docs/baselines.md
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)

@@ -119,7 +119,7 @@ class PerSamMatcher(CropMatcher):
     default_sigma = 0.925
     weights_spec = WEIGHTS
     paper = PAPER
-    version = 2  # 2: score and points from the image-resolution map, reference cells as Personalize-SAM takes them
+    version = 2  # what each version changed: docs/baselines.md
     _fine_tunes = False  # PerSAM-F learns mask weights per reference in prepare
     _negative_point = True  # PerSAM prompts the argmin as a negative point; PerSAM-F does not
 
