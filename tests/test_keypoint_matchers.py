@@ -234,6 +234,8 @@ def test_ieve_parts_are_configured_by_nested_dicts_and_dotted_keys():
     assert dotted.id == nested.id != create_matcher("ieve").id  # the parts' ids, not their spelling, name it
     merged = create_matcher("ieve", gate_cfg='{"top_k": 7, "prompt": "description"}', **{"gate_cfg.top_k": "9"})
     assert (merged.gate.cfg.top_k, merged.gate.cfg.prompt) == (9, "description")
+    moved = create_matcher("ieve", device="cuda:1", keypoints_cfg={"device": "cpu"})  # construction loads nothing
+    assert (moved.gate.cfg.device, moved.keypoints.cfg.device) == ("cuda:1", "cpu")
 
 
 def test_ieve_default_parts_are_owl_by_category_and_disk_lightglue(monkeypatch):

@@ -94,7 +94,7 @@ def border_dir(tmp_path_factory):
 @pytest.fixture(scope="module")
 def border_model(border_dir):
     m = create_matcher("superglue", weights=border_dir)
-    return m._load(border_dir).eval()
+    return m._from_pretrained(border_dir).eval()
 
 
 def noise_frame(seed: int, shape=(96, 128)) -> np.ndarray:
