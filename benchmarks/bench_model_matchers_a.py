@@ -43,7 +43,7 @@ def run(quick: bool) -> dict:
         options = {
             "superglue": {"weights": paths["superglue"]},
             "lightglue": {"weights": paths["lightglue"]},
-            "ieve": {"gate_weights": paths["owl"], "keypoints_weights": paths["lightglue"]},
+            "ieve": {"gate_cfg": {"weights": paths["owl"]}},  # its keypoint part, disk-lightglue, carries its weights
             "owl": {"weights": paths["owl"]},
             "owl-image": {"weights": paths["owl"]},
         }

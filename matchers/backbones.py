@@ -9,7 +9,7 @@ constructed, which the matchers do lazily on first use, never at import.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Protocol
@@ -17,8 +17,6 @@ from typing import Protocol
 import numpy as np
 import torch
 import torch.nn.functional as F
-
-from pin_match.contract import WeightsError, WeightsSpec
 
 # checkpoint names looked for, in order, when ``weights=`` names a folder (what the libraries save)
 TIMM_FILES = ("model.safetensors", "pytorch_model.bin", "model.pth")
@@ -88,34 +86,6 @@ def network_input(backbone: TimmBackbone | OpenClipBackbone | FeatureMapBackbone
     """
     return squash_batch(images, backbone.input_size, backbone.mean, backbone.std,
                         backbone.interpolation).to(backbone.device)
-
-
-def _checkpoint_in(path: Path, names: Sequence[str]) -> Path:
-    if path.is_file():
-        return path
-    for name in names:
-        if (path / name).is_file():
-            return path / name
-    raise WeightsError(f"weights folder {path} holds none of {', '.join(names)}")
-
-
-def resolve_checkpoint(spec: WeightsSpec, hub_id: str, override: str | None, names: Sequence[str],
-                       download: Callable[[str], str]) -> Path:
-    """The local checkpoint file: the user's override, else the hub copy (cached, or fetched when online).
-
-    Any hub failure becomes a WeightsError naming the hub id, because "offline and not cached"
-    is the common case here and the fix (pass ``weights=``) should be in the message.
-    """
-    from huggingface_hub.errors import EntryNotFoundError
-
-    local = spec.local_path(override)
-    if local is not None:
-        return _checkpoint_in(local, names)
-    try:
-        return Path(download(hub_id))
-    except (OSError, ValueError, RuntimeError, EntryNotFoundError) as exc:
-        raise WeightsError(f"cannot get the weights of hub id {hub_id!r} ({type(exc).__name__}: {exc}); "
-                           f"download them once, or pass weights=<local file or folder>") from exc
 
 
 class TimmBackbone:
@@ -225,8 +195,8 @@ class FeatureMapBackbone:
     Only the modules up to the layer are kept and run, so a stride-16 layer costs the early
     stages only. The global vector is the feature map's mean over cells (the network's own
     pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
-    channels-last: on a CPU EfficientNet-Lite0's convolutions ran 1.13x (blocks.3 at 224) to 1.36x
-    (head at 448) faster than NCHW side by side (``benchmarks/bench_effnet.py``), features equal up to rounding.
+    channels-last: CPU convolutions run faster in that layout, with features equal up to rounding
+    (docs/performance.md).
     """
 
     def __init__(self, trunk: torch.nn.Sequential, normalisation: tuple[Sequence[float], Sequence[float], str],

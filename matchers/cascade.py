@@ -10,37 +10,20 @@ the keypoint evidence on top of the patch score:
 
 so a frame without keypoint matches keeps its patch score and every match raises it, with
 diminishing returns (ten matches are much more than none, 110 little more than 100). Both
-parts are registered matchers built by name, each with its own crop policy; their ids enter
-this matcher's id.
+parts are registered matchers built by name, each with its own config (``--cfg
+patch_cfg.img_size=448``) and crop policy; their ids enter this matcher's id.
 """
 
 from __future__ import annotations
 
 import math
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from pin_match.contract import (
-    ConfigError,
-    Matcher,
-    MatcherConfig,
-    MatchResult,
-    Modality,
-    Target,
-    WeightsError,
-    create_matcher,
-    parse_overrides,
-    register_matcher,
-)
-
-
-def part_overrides(text: str, option: str) -> dict[str, str]:
-    """``"layer=head,img_size=448"`` into overrides for a part; ConfigError naming the option when malformed."""
-    try:
-        return parse_overrides([p for p in text.split(",") if p.strip()])
-    except ConfigError as exc:
-        raise ConfigError(f"{option}={text!r}: {exc}") from exc
+from pin_match.contract import ConfigError, MatcherConfig, MatchResult, Modality, register_matcher
+from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
 
 
 def keypoint_bonus(keypoint_score: float, weight: float) -> float:
@@ -64,50 +47,33 @@ def cascade_result(patch: MatchResult, keypoints: MatchResult, weight: float) ->
 @dataclass
 class CascadeConfig(MatcherConfig):
     patch: str = field(default="effnet-parts", metadata={"help": "registered matcher giving the patch score"})
-    patch_cfg: str = field(default="", metadata={"help": "its config, key=value,key=value"})
+    patch_cfg: dict[str, Any] = part_cfg_field("patch")
     keypoints: str = field(default="xfeat", metadata={"help": "registered matcher counting matched keypoints"})
-    keypoints_cfg: str = field(default="", metadata={"help": "its config, key=value,key=value"})
+    keypoints_cfg: dict[str, Any] = part_cfg_field("keypoints")
     weight: float = field(default=0.02, metadata={"help": "score = patch + weight x log(1 + keypoint score)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if "parts-cascade" in (self.patch, self.keypoints):
-            raise ConfigError("matcher parts-cascade cannot use itself as a part")
         if not (math.isfinite(self.weight) and self.weight >= 0):
             raise ConfigError(f"{type(self).__name__}: weight={self.weight} must be finite and >= 0")
 
 
 @register_matcher("parts-cascade")
-class PartsCascadeMatcher(Matcher):
+class PartsCascadeMatcher(CompositeMatcher):
     """Patch score plus weight x log(1 + matched keypoints) (see module doc)."""
 
     Config = CascadeConfig
     modality = Modality.VISUAL
-    # F1 on the real look-alike set's train instances, both variants at once (23.3 shot / 45.8 pasted; 0.65 matched
-    # almost no target: 14.3 / 0.0)
+    # tuned on the real look-alike set's train instances (docs/instance-matchers.md)
     default_sigma = 0.374
     version = 1
-    paper = "pin_match: keypoint verification on a part-matching score (issue 21)"
+    paper = "pin_match: keypoint verification on a part-matching score"
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)
-        self.patch = create_matcher(self.cfg.patch, **part_overrides(self.cfg.patch_cfg, "patch_cfg"))
-        self.keypoints = create_matcher(self.cfg.keypoints, **part_overrides(self.cfg.keypoints_cfg, "keypoints_cfg"))
-        for role, part in self.parts().items():
-            if part.modality is not Modality.VISUAL:
-                raise ConfigError(f"matcher parts-cascade: {role} part {part.display_name!r} is of the "
-                                  f"{part.modality.value} modality; the cascade needs visual parts")
-
-    def parts(self) -> dict[str, Matcher]:
-        return {"patch": self.patch, "keypoints": self.keypoints}
-
-    def _prepare(self, target: Target) -> None:
-        for role, part in self.parts().items():
-            try:
-                part.prepare(target)
-            except WeightsError as exc:
-                raise WeightsError(f"matcher parts-cascade, {role} part {part.display_name!r} (set {role}_cfg="
-                                   f"weights=...): {exc}") from exc
+        self.patch = self.add_part("patch", self.cfg.patch, self.cfg.patch_cfg)
+        self.keypoints = self.add_part("keypoints", self.cfg.keypoints, self.cfg.keypoints_cfg)
+        self.require_visual()
 
     def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
         patches = self.patch.match_batch(images)

@@ -28,7 +28,6 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("openai/clip-vit-base-patch32", license="MIT")
 RELEVANCE_SCALE = 10.0  # CoW multiplies the relevance by 10 before thresholding
@@ -72,7 +71,7 @@ class ClipGradMatcher(CropMatcher):
     default_sigma = 0.85
     weights_spec = WEIGHTS
     paper = "CLIP on Wheels (Gadre et al., CVPR 2023), relevance after Chefer et al. (ICCV 2021)"
-    version = 2  # 2: score from the upsampled map CoW thresholds (was: the 7 x 7 grid)
+    version = 2  # what each version changed: docs/baselines.md
 
     def __init__(self, cfg: ClipGradConfig | None = None) -> None:
         super().__init__(cfg)
@@ -83,8 +82,8 @@ class ClipGradMatcher(CropMatcher):
     # ------------------------------------------------------------------ target
     def _prepare(self, target: Target) -> None:
         if self._model is None:
-            self._model = load_pretrained(WEIGHTS, self.cfg.weights, f"matcher {self.display_name}",
-                                          _load_clipmodel).to(self.cfg.device)
+            self._model = self.weights_spec.load_pretrained(self.cfg.weights, f"matcher {self.display_name}",
+                                                            _load_clipmodel).to(self.cfg.device)
             self._model.requires_grad_(False)  # only the attention probabilities need a gradient
         if target.descriptions not in self._cache:  # episodes share targets: encode each once
             self._cache[target.descriptions] = self._encode_descriptions(target.descriptions)
@@ -182,7 +181,7 @@ class ClipGradMatcher(CropMatcher):
 
 
 def _load_clipmodel(source: str):
-    """The eval-mode model from a hub id or a save_pretrained folder (through ``load_pretrained``)."""
+    """The eval-mode model from a hub id or a save_pretrained folder (through ``WeightsSpec.load_pretrained``)."""
     from transformers import CLIPModel
 
     return CLIPModel.from_pretrained(source).eval()

@@ -45,9 +45,9 @@ class EffnetMatcher(FeatureMapMatcher):
     Config = EffnetConfig
     weights_spec = carrier(0, CARRIER_FILE)
     version = 1
-    # between the real-photo set's target frames (quartiles 0.53-0.63) and the rest (3rd quartile 0.50);
-    # cosines on synthetic renders sit elsewhere: tune with pin-match tune for a given frame-set
-    default_sigma = 0.40  # F1-tuned on the train instances of the real look-alike set: 0.41 pasted, 0.40 shot
+    # F1-tuned on the real look-alike set's train instances (docs/real-matchers.md); cosines on synthetic renders
+    # sit elsewhere: tune with pin-match tune for a given frame-set
+    default_sigma = 0.40
     paper = PAPER
 
     @property
@@ -70,7 +70,7 @@ class EffnetLite1Matcher(EffnetMatcher):
 
     Config = EffnetLite1Config
     weights_spec = carrier(1, "models/efficientnet-lite1-77cc7160.pth")
-    default_sigma = 0.38  # F1-tuned on the real look-alike set's train instances: 0.39 pasted, 0.38 shot
+    default_sigma = 0.38  # F1-tuned as effnet's (docs/real-matchers.md)
 
 
 @dataclass
@@ -84,4 +84,4 @@ class EffnetLite2Matcher(EffnetMatcher):
 
     Config = EffnetLite2Config
     weights_spec = carrier(2, "models/efficientnet-lite2-9656183e.pth")
-    default_sigma = 0.36  # F1-tuned on the real look-alike set's train instances: 0.35 pasted, 0.38 shot
+    default_sigma = 0.36  # F1-tuned as effnet's (docs/real-matchers.md)

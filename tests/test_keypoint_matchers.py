@@ -15,15 +15,15 @@ from conftest import make_view
 from pin_match.contract import registry
 from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
 from pin_match.contract.registry import create_matcher
-from pin_match.matchers.keypoint import (
+from pin_match.matchers.ieve import gated_count
+from pin_match.matchers.keypoints import (
+    combined_verdict,
+    confidence_sum,
     count_verdict,
-    gated_count,
     normalize_keypoints,
-    prepare_references,
-    square_box,
-    superglue_verdict,
     valid_matches,
 )
+from pin_match.matchers.references import prepare_references, square_box
 
 
 @pytest.fixture(scope="module")
@@ -135,7 +135,7 @@ def test_valid_matches_ignore_indices_into_padding():
 def test_superglue_score_sums_confidences_points_need_the_reference_keypoint_on_the_object():
     matches0, matches1, conf0, ref_xy, mask, obs_xy = hand_made_pair()
     pair = valid_matches(matches0, matches1, conf0, ref_xy, mask, threshold=0.2)
-    r = superglue_verdict([pair, pair], obs_xy)  # two references with the same matches
+    r = combined_verdict([pair, pair], obs_xy, "sum", confidence_sum)  # two references with the same matches
     assert r.score == pytest.approx(2 * (0.9 + 0.5))
     np.testing.assert_allclose(r.points, [[10.0, 11.0]])  # obs 0 only, once
     assert r.point_scores is None  # every point carries the frame score: points_at(8.0) keeps or drops all
@@ -214,12 +214,28 @@ def test_ieve_composes_registered_parts_and_gives_the_gate_the_category(monkeypa
 
 
 def test_ieve_config_errors():
-    with pytest.raises(ConfigError, match="gate_weights"):
+    with pytest.raises(ConfigError, match="no config key 'weights'"):
         create_matcher("ieve", weights="/tmp")
     with pytest.raises(ConfigError, match="itself"):
         create_matcher("ieve", keypoints="ieve")
     with pytest.raises(KeyError, match="unknown matcher"):
         create_matcher("ieve", gate="no-such-detector")
+    with pytest.raises(ConfigError, match="matcher ieve, gate part: matcher 'owl' has no config key 'topk'"):
+        create_matcher("ieve", **{"gate_cfg.topk": "5"})
+    with pytest.raises(ConfigError, match="'gate_sigma' is not a dict"):
+        create_matcher("ieve", **{"gate_sigma.x": "5"})
+
+
+def test_ieve_parts_are_configured_by_nested_dicts_and_dotted_keys():
+    dotted = create_matcher("ieve", **{"gate_cfg.top_k": "5", "keypoints_cfg.max_keypoints": "64"})
+    nested = create_matcher("ieve", gate_cfg={"top_k": 5}, keypoints_cfg={"max_keypoints": 64})
+    assert (dotted.gate.cfg.top_k, dotted.keypoints.cfg.max_keypoints) == (5, 64)
+    assert dotted.gate.cfg.query == "category"  # the gate's category query stays under the user's keys
+    assert dotted.id == nested.id != create_matcher("ieve").id  # the parts' ids, not their spelling, name it
+    merged = create_matcher("ieve", gate_cfg='{"top_k": 7, "prompt": "description"}', **{"gate_cfg.top_k": "9"})
+    assert (merged.gate.cfg.top_k, merged.gate.cfg.prompt) == (9, "description")
+    moved = create_matcher("ieve", device="cuda:1", keypoints_cfg={"device": "cpu"})  # construction loads nothing
+    assert (moved.gate.cfg.device, moved.keypoints.cfg.device) == ("cuda:1", "cpu")
 
 
 def test_ieve_default_parts_are_owl_by_category_and_disk_lightglue(monkeypatch):
@@ -237,7 +253,7 @@ def test_construction_loads_nothing_and_offline_error_names_hub_id_and_override(
     with pytest.raises(OSError, match=r"magic-leap-community/superglue_indoor.*weights="):
         m.prepare(target)
     m = create_matcher("ieve")  # the composite's message names its own option for the failing part
-    with pytest.raises(OSError, match=r"part 'owl' \(set gate_weights=\).*google/owlvit-base-patch32"):
+    with pytest.raises(OSError, match=r"part 'owl' \(set gate_cfg.weights=\).*google/owlvit-base-patch32"):
         m.prepare(target)
 
 
@@ -248,7 +264,7 @@ def test_tiny_checkpoint_gives_valid_deterministic_results(name, superglue_dir, 
     m.prepare(target)
     assert len(m._refs) == 6
     detector = m._model.keypoint_detector.keypoint_decoder  # the config reaches the loaded model
-    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (keypoint.detect)
+    # SuperPoint returns every keypoint; the border and top-48 rules are the matcher's (superpoint.detect)
     assert (detector.nms_radius, detector.keypoint_threshold, detector.max_keypoints) == (3, 0.005, -1)
     assert all(len(k.xy) <= 48 for k, _, _ in m._refs)
     if name == "superglue":
@@ -344,7 +360,7 @@ def corner_keypoints(detector, grays, device, max_keypoints=-1):
     """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
     equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
     9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
-    from pin_match.matchers.keypoint import Keypoints
+    from pin_match.matchers.keypoints import Keypoints
 
     proj = np.random.default_rng(7).standard_normal((81, 32))
     found = []
@@ -373,9 +389,9 @@ def superglue_peaky_dir(tmp_path_factory):
 @pytest.mark.parametrize("iterations", [20, 3])
 def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, superglue_peaky_dir, target,
                                                                  iterations):
-    import pin_match.matchers.keypoint as keypoint
+    import pin_match.matchers.superpoint as superpoint
 
-    monkeypatch.setattr(keypoint, "detect", corner_keypoints)
+    monkeypatch.setattr(superpoint, "detect", corner_keypoints)
     sums = {}
     for combine in ("sum", "max"):
         m = create_matcher("superglue", weights=superglue_peaky_dir, sinkhorn_iterations=iterations,
@@ -473,10 +489,11 @@ def lightglue_variant(request, tmp_path_factory):
 
 
 def test_lightglue_pairs_equal_cvg_lightglue_on_the_same_keypoints(monkeypatch, lightglue_variant, target):
-    import pin_match.matchers.keypoint as keypoint
+    import pin_match.matchers.lightglue as lightglue
+    import pin_match.matchers.superpoint as superpoint
 
     variant, weights = lightglue_variant
-    monkeypatch.setattr(keypoint, "detect", corner_keypoints)
+    monkeypatch.setattr(superpoint, "detect", corner_keypoints)
     threshold = 0.01
     m = create_matcher("lightglue", weights=weights, match_threshold=threshold)
     m.prepare(target)
@@ -488,7 +505,7 @@ def test_lightglue_pairs_equal_cvg_lightglue_on_the_same_keypoints(monkeypatch, 
     pairs, stops, pruned = [], set(), 0
     for ref, ref_xy, mask in m._refs:
         with torch.inference_mode():
-            ours = [t.numpy() for t in keypoint.lightglue_pair(m._model, obs, ref, threshold)]
+            ours = [t.numpy() for t in lightglue.lightglue_pair(m._model, obs, ref, threshold)]
             out = reference({f"image{i}": {"keypoints": k.xy[None], "descriptors": k.descriptors[None],
                                            "image_size": torch.tensor([[k.width, k.height]])}
                              for i, k in enumerate((obs, ref))})

@@ -74,3 +74,41 @@ def test_carrier_package_missing_or_damaged_is_named(monkeypatch, tmp_path):
     from pin_match.contract.weights import load_torch_state
     with pytest.raises(WeightsError, match=r"cannot read the checkpoint .*model.pth \(damaged"):
         load_torch_state(lacking.resolve(None), "matcher x")
+
+
+def test_one_resolver_takes_a_file_a_known_name_in_a_folder_or_the_hub(tmp_path):
+    spec = WeightsSpec("no-such/repo", filename="model.safetensors")
+    single = tmp_path / "any-name.bin"
+    single.write_bytes(b"x")
+    assert spec.resolve(str(single)) == single  # a file is taken as it is named
+    folder = tmp_path / "saved"
+    folder.mkdir()
+    with pytest.raises(WeightsError, match=r"^matcher m: the weights folder .*saved holds no file named a\.pth or "
+                                           r"model\.safetensors$"):
+        spec.resolve(str(folder), "matcher m", ("a.pth",))
+    (folder / "model.safetensors").write_bytes(b"y")
+    assert spec.resolve(str(folder), "matcher m", ("a.pth",)) == folder / "model.safetensors"
+    (folder / "a.pth").write_bytes(b"z")
+    assert spec.resolve(str(folder), "matcher m", ("a.pth",)) == folder / "a.pth"  # the library's own names first
+    with pytest.raises(WeightsError, match=r"^matcher m: cannot get the weights of hub id 'no-such/repo' .*pass "
+                                           r"weights=<local file or folder>$"):
+        spec.resolve(None, "matcher m")  # offline (conftest) and not cached
+
+
+def test_a_matcher_loading_several_files_takes_a_folder_not_one_file(tmp_path, monkeypatch):
+    from pin_match.contract import resolve_all
+
+    (tmp_path / "carrier").mkdir()
+    (tmp_path / "carrier" / "__init__.py").write_text("")
+    for name in ("a.pth", "b.pth"):
+        (tmp_path / "carrier" / name).write_bytes(name.encode())
+    monkeypatch.syspath_prepend(str(tmp_path))
+    specs = {"glue": WeightsSpec(package="carrier", package_file="a.pth"),
+             "extractor": WeightsSpec(package="carrier", package_file="b.pth")}
+    assert resolve_all(specs, None, "m") == {"glue": tmp_path / "carrier" / "a.pth",
+                                             "extractor": tmp_path / "carrier" / "b.pth"}
+    assert resolve_all(specs, str(tmp_path / "carrier"), "m")["extractor"] == tmp_path / "carrier" / "b.pth"
+    with pytest.raises(WeightsError, match=r"^m: weights=.*a\.pth is a file; pass a folder holding a\.pth and b\.pth$"):
+        resolve_all(specs, str(tmp_path / "carrier" / "a.pth"), "m")
+    assert resolve_all({"glue": specs["glue"]}, str(tmp_path / "carrier" / "b.pth"), "m") == \
+        {"glue": tmp_path / "carrier" / "b.pth"}  # one file for a one-file matcher

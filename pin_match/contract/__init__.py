@@ -37,7 +37,15 @@ from pin_match.contract.registry import (
     with_weights,
 )
 from pin_match.contract.testing import ContractError, check_matcher
-from pin_match.contract.weights import WeightsError, WeightsSpec, content_digest, load_torch_state, misfit
+from pin_match.contract.weights import (
+    WeightsError,
+    WeightsSpec,
+    content_digest,
+    load_torch_state,
+    misfit,
+    read_state_dict,
+    resolve_all,
+)
 from pin_match.errors import PinMatchError
 
 __all__ = [
@@ -46,5 +54,5 @@ __all__ = [
     "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec", "available_names", "build_config",
     "check_matcher", "content_digest", "create_matcher", "crop_boxes", "crops_field", "get_matcher_class",
     "list_matchers", "load_torch_state", "merge_crop_results", "misfit", "parse_overrides", "points_above",
-    "register_matcher", "weights_field", "with_weights",
+    "read_state_dict", "register_matcher", "resolve_all", "weights_field", "with_weights",
 ]

@@ -16,6 +16,7 @@ import fnmatch
 import functools
 import importlib
 import importlib.util
+import json
 import types
 import typing
 from collections.abc import Callable
@@ -127,17 +128,35 @@ def get_matcher_class(name: str) -> type[Matcher]:
 
 
 def build_config(cls: type[Matcher], overrides: dict[str, Any]) -> MatcherConfig:
-    """The matcher's defaults merged with the user's overrides (strings from the CLI are coerced)."""
+    """The matcher's defaults merged with the user's overrides (strings from the CLI are coerced).
+
+    A dotted key ``part_cfg.img_size`` sets one key inside the dict field ``part_cfg`` (a
+    composite's part config), on top of that field's default or of a whole dict given with it;
+    its value is left to the part's own ``build_config`` to coerce.
+    """
     fields = {f.name: f for f in dataclasses.fields(cls.Config)}
     hints = typing.get_type_hints(cls.Config)
-    kwargs = {}
+    kwargs: dict[str, Any] = {}
+    nested: dict[str, dict[str, Any]] = {}
     for key, value in overrides.items():
-        if key not in fields:
-            close = difflib.get_close_matches(key, list(fields), n=3, cutoff=0.5)
+        name, dotted, inner = key.partition(".")
+        if name not in fields:
+            close = difflib.get_close_matches(name, list(fields), n=3, cutoff=0.5)
             hint = f"; did you mean {', '.join(close)}?" if close else f"; valid keys: {', '.join(fields)}"
-            raise ConfigError(f"matcher {cls.name!r} has no config key {key!r}{hint}")
-        kwargs[key] = _coerce(key, value, hints[key]) if isinstance(value, str) else value
+            raise ConfigError(f"matcher {cls.name!r} has no config key {name!r}{hint}")
+        if dotted:
+            if typing.get_origin(hints[name]) is not dict:
+                raise ConfigError(f"matcher {cls.name!r}: config key {name!r} is not a dict, so {key!r} sets nothing")
+            nested.setdefault(name, {})[inner] = value
+        else:
+            kwargs[name] = _coerce(key, value, hints[name]) if isinstance(value, str) else value
+    for name, inner in nested.items():
+        kwargs[name] = {**kwargs.get(name, _default(fields[name])), **inner}
     return cls.Config(**kwargs)
+
+
+def _default(f: dataclasses.Field) -> Any:
+    return f.default_factory() if f.default_factory is not dataclasses.MISSING else f.default
 
 
 def _coerce(key: str, text: str, hint: Any) -> Any:
@@ -145,19 +164,28 @@ def _coerce(key: str, text: str, hint: Any) -> Any:
     if type(None) in options and text.lower() in ("none", "null", ""):
         return None
     for typ in options:
-        origin = typing.get_origin(typ)
         try:
-            if origin in (tuple, list):
-                item = next((a for a in typing.get_args(typ) if a is not Ellipsis), str)
-                return origin(_coerce(key, x.strip(), item) for x in text.split(",") if x.strip())
-            if typ is bool:
-                return {"1": True, "true": True, "yes": True, "on": True,
-                        "0": False, "false": False, "no": False, "off": False}[text.lower()]
-            if typ in (int, float, str):
-                return typ(text)
+            return _coerce_to(key, text, typ)
         except (ValueError, KeyError, ConfigError):
             continue
     raise ConfigError(f"config key {key!r}: cannot read {text!r} as {hint}")
+
+
+def _coerce_to(key: str, text: str, typ: Any) -> Any:
+    origin = typing.get_origin(typ)
+    if origin in (tuple, list):
+        item = next((a for a in typing.get_args(typ) if a is not Ellipsis), str)
+        return origin(_coerce(key, x.strip(), item) for x in text.split(",") if x.strip())
+    if origin is dict:  # a whole part config on the command line: a JSON object
+        value = json.loads(text)
+        if isinstance(value, dict):
+            return value
+    elif typ is bool:
+        return {"1": True, "true": True, "yes": True, "on": True,
+                "0": False, "false": False, "no": False, "off": False}[text.lower()]
+    elif typ in (int, float, str):
+        return typ(text)
+    raise ValueError(text)
 
 
 def parse_overrides(pairs: list[str] | None) -> dict[str, str]:
