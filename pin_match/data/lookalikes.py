@@ -78,8 +78,8 @@ CORE50_SOURCE = "github:giacomobartoli/core50_segmentation"
 TUM_LICENCE = "CC BY 4.0 (TUM RGB-D benchmark, Sturm et al. 2012; frames from fr3/long_office_household)"
 TUM_SOURCE = "github:gaoxiang12/slambook2"
 TUM_FRAMES = tuple(f"ch11/data/{k}.png" for k in range(1, 11))
-# CORe50 photos whose automatic mask passes the rules of pin_match.data.mask_check but is wrong by eye (every photo
-# was looked at on a contact sheet of photo, mask outline and cut-out): prepare_core50 leaves them out
+# CORe50 photos whose automatic mask, repaired or not, passes the rules of pin_match.data.mask_check but is wrong by
+# eye (every photo was looked at on a contact sheet of photo, mask outline and cut-out): prepare_core50 leaves them out
 CORE50_BAD_MASKS = {
     "core50_s07_o01_007": "the mask takes the grey base only; the blue top is cut off",
     "core50_s02_o08_005": "the mask takes a dark object beside the phone",
@@ -96,6 +96,10 @@ CORE50_BAD_MASKS = {
     "core50_s05_o36_007": "the mask keeps the hand and the floor",
     "core50_s05_o47_011": "the mask keeps the thumb",
     "core50_s09_o50_012": "the mask keeps the fingers",
+    "core50_s04_o02_005": "the mask keeps the fingers around the adapter (one pink with it in this light)",
+    "core50_s04_o28_006": "the skin repair eats the pink frame: the object's colour is in the skin box",
+    "core50_s06_o45_010": "the skin repair eats the mauve mug: the object's colour is in the skin box",
+    "core50_s09_o41_011": "the skin repair eats the red print of the mug",
 }
 # PIN's camera: 360 px wide, horizontal field of view 42 degrees (as the synthetic set), so a focal length of
 # 180 / tan(21 deg) = 469 px; an object of longest side L metres at D metres spans 469 * L / D pixels
