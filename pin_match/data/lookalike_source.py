@@ -29,6 +29,7 @@ import numpy as np
 from pin_match import atomic
 from pin_match.data.compose import largest_piece, stable_seed
 from pin_match.data.frameset import SPLITS
+from pin_match.data.mask_check import skin_pixels
 from pin_match.errors import PinMatchError
 
 # the CORe50 photos, their masks and the TUM rooms, as prepare_core50 wrote them (licences: NOTICE.md there)
@@ -58,8 +59,9 @@ def object_mask(rgb: np.ndarray, iterations: int = 5) -> np.ndarray:
     """An automatic mask (uint8, 255 = object) of the one object near the centre of a photo.
 
     Why this recipe: the photos centre one hand-held object, so GrabCut is seeded with the
-    border as sure background and the middle as probable object; skin-coloured pixels (YCrCb
-    box of Chai & Ngan 1999) start as probable background so the holding hand mostly drops out.
+    border as sure background and the middle as probable object; skin-coloured pixels
+    (``pin_match.data.mask_check.skin_pixels``) start as probable background so the
+    holding hand mostly drops out.
     The largest connected piece is kept and its holes filled. When GrabCut keeps nothing, the
     seed's middle minus skin is the mask. Deterministic (OpenCV's RNG seeded).
     """
@@ -67,9 +69,7 @@ def object_mask(rgb: np.ndarray, iterations: int = 5) -> np.ndarray:
     seed = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
     by, bx = max(h // 10, 2), max(w // 10, 2)
     seed[by:h - by, bx:w - bx] = cv2.GC_PR_FGD
-    ycrcb = cv2.cvtColor(rgb, cv2.COLOR_RGB2YCrCb)
-    skin = (ycrcb[..., 1] >= 138) & (ycrcb[..., 1] <= 173) & (ycrcb[..., 2] >= 77) & (ycrcb[..., 2] <= 127)
-    seed[skin & (seed == cv2.GC_PR_FGD)] = cv2.GC_PR_BGD
+    seed[skin_pixels(rgb) & (seed == cv2.GC_PR_FGD)] = cv2.GC_PR_BGD
     edge = max(min(h, w) // 32, 1)
     seed[:edge], seed[-edge:], seed[:, :edge], seed[:, -edge:] = (cv2.GC_BGD,) * 4
     fallback = (seed == cv2.GC_PR_FGD).astype(np.uint8)
