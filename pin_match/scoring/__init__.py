@@ -3,12 +3,12 @@
 ``score`` / ``score_to_file`` run episodes here (``local``) or on a Dask cluster
 (``cluster``); both call ``episode.score_episode`` and write the same chunk files, so
 either resumes the other. ``cache`` holds the folder rule, finding and merging tables;
-``table`` the ``ScoreTable`` every later step reads.
+``table`` the ``ScoreTable`` every later step reads; ``options`` the ``RunOptions`` (batch
+size, workers, progress bars) that callers pass down as one object.
 """
 
 from pin_match.scoring.api import score, score_to_file
 from pin_match.scoring.cache import (
-    DEFAULT_OUT,
     Shard,
     ShardError,
     cache_dir,
@@ -20,8 +20,9 @@ from pin_match.scoring.cache import (
     table_name,
 )
 from pin_match.scoring.episode import score_episode
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable, ScoreTableError
 
-__all__ = ["DEFAULT_OUT", "ScoreTable", "ScoreTableError", "Shard", "ShardError", "cache_dir", "canonical_order",
-           "find_score_table", "merge", "read_meta", "score", "score_episode", "score_to_file", "table_meta",
-           "table_name"]
+__all__ = ["DEFAULT_RUN", "RunOptions", "ScoreTable", "ScoreTableError", "Shard", "ShardError", "cache_dir",
+           "canonical_order", "find_score_table", "merge", "read_meta", "score", "score_episode", "score_to_file",
+           "table_meta", "table_name"]
