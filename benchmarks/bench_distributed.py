@@ -35,7 +35,7 @@ import numpy as np
 
 from benchmarks.framesets import procedural
 from pin_match.contract.registry import create_matcher
-from pin_match.scoring import score_to_file
+from pin_match.scoring import RunOptions, score_to_file
 from pin_match.scoring.cluster import connect, local_cluster
 
 SIZES = (128, 512, 2048)
@@ -57,7 +57,7 @@ def start_clients(matcher, warm_fs) -> tuple[dict, dict]:
         clients[label].wait_for_workers(len(clients[label].nthreads()) or 1)
         t1 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
-            score_to_file(warm_fs.root, matcher, out=tmp, client=clients[label], progress=False)
+            score_to_file(warm_fs.root, matcher, out=tmp, client=clients[label], run=RunOptions(progress=False))
         startup[label] = {"start_s": round(t1 - t0, 2), "cold_run_s": round(time.perf_counter() - t1, 2)}
     return clients, startup
 
@@ -93,13 +93,13 @@ def run(quick: bool = False) -> dict:
         clients, startup = start_clients(matcher, framesets[sizes[0]])
         try:
             with tempfile.TemporaryDirectory() as warm:  # in-process cold run: imports and builds the matcher here
-                score_to_file(framesets[sizes[0]].root, matcher, out=warm, workers=1, progress=False)
+                score_to_file(framesets[sizes[0]].root, matcher, out=warm, run=RunOptions(workers=1, progress=False))
             for n in sizes:
                 for setup in SETUPS:
                     out = Path(tmp) / f"{setup}-{n}".replace(" ", "_")
                     c0, t0 = cpu_seconds(), time.perf_counter()
-                    score_to_file(framesets[n].root, matcher, out=out, workers=1, client=clients.get(setup),
-                                  progress=False)
+                    score_to_file(framesets[n].root, matcher, out=out, client=clients.get(setup),
+                                  run=RunOptions(workers=1, progress=False))
                     wall = time.perf_counter() - t0
                     seconds[setup][n], busy[setup][n] = round(wall, 3), round((cpu_seconds() - c0) / wall, 2)
                     print(f"  {setup:<24} {n:5d} frames {seconds[setup][n]:8.2f} s, {busy[setup][n]:.2f} cores busy",

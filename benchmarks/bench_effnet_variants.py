@@ -31,7 +31,7 @@ from pin_match import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 
 MAX_AUROC_CHANGE = 0.005
 VARIANTS = {"eager": {}, "compile": {"compile": True}}
@@ -45,7 +45,7 @@ def auroc_change(frameset: FrameSet | str | Path, overrides: dict | None = None)
     with tempfile.TemporaryDirectory() as tmp:
         for name, variant in VARIANTS.items():
             table = score(fs, create_matcher("effnet", **(overrides or {}), **variant), out=Path(tmp) / name,
-                          progress=False)
+                          run=RunOptions(progress=False))
             metrics = ranking_metrics(frame_arrays(scored_frames(labels, table)))
             out[name] = {k: round(metrics[k], 4) for k in ("auroc_target", "auroc_same")}
     change = {k: round(out["compile"][k] - out["eager"][k], 4) for k in out["eager"]}

@@ -16,8 +16,8 @@ from benchmarks.framesets import procedural
 # VmHWM, not ru_maxrss: the latter survives exec and would report the parent's peak
 CHILD = """
 import sys
-from pin_match.scoring import score_to_file
-score_to_file(sys.argv[1], "color", out=sys.argv[2], progress=False, workers=2)
+from pin_match.scoring import RunOptions, score_to_file
+score_to_file(sys.argv[1], "color", out=sys.argv[2], run=RunOptions(workers=2, progress=False))
 print(next(line.split()[1] for line in open("/proc/self/status") if line.startswith("VmHWM")))
 """
 

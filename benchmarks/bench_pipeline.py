@@ -20,7 +20,7 @@ from benchmarks.timing import once
 from pin_match.contract.crops import crop_boxes
 from pin_match.contract.registry import create_matcher
 from pin_match.matchers.backbones import network_input
-from pin_match.scoring import score_to_file
+from pin_match.scoring import RunOptions, score_to_file
 
 BATCH = 8  # frames per batch = 16 crops per forward
 
@@ -40,8 +40,8 @@ def run(quick: bool = False) -> dict:
 
         matcher = create_matcher("dino", **overrides)
         backbone = matcher.backbone  # built once, before any clock, on both sides
-        t_pipeline = once(lambda: score_to_file(fs, matcher, out=Path(tmp) / "scores", batch_size=BATCH,
-                                                progress=False)).wall_s
+        t_pipeline = once(lambda: score_to_file(fs, matcher, out=Path(tmp) / "scores",
+                                                run=RunOptions(batch_size=BATCH, progress=False))).wall_s
 
         # the matcher's own crops and preprocessing (``network_input``, which its ``encode`` calls), before the clock
         images = (fs.image(f) for f in fs.frames.sort_values(["episode_id", "step"]).frame_id)

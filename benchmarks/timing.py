@@ -19,7 +19,7 @@ import torch
 from pin_match import Target, create_matcher
 from pin_match.contract import Matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring import ScoreTable, score
+from pin_match.scoring import RunOptions, ScoreTable, score
 
 
 @dataclass(frozen=True)
@@ -68,8 +68,9 @@ def timed_score(fs: FrameSet, matcher: str | Matcher, workers: int) -> tuple[Sco
     """One ``score`` run into a fresh cache, the whole engine from decoding to the table; its wall seconds."""
     got: dict[str, ScoreTable] = {}
     with tempfile.TemporaryDirectory() as tmp:
-        run = once(lambda: got.update(table=score(fs, matcher, out=tmp, workers=workers, progress=False)))
-    return got["table"], run.wall_s
+        options = RunOptions(workers=workers, progress=False)
+        timing = once(lambda: got.update(table=score(fs, matcher, out=tmp, run=options)))
+    return got["table"], timing.wall_s
 
 
 def bench_inputs(quick: bool) -> tuple[Target, list[np.ndarray]]:

@@ -18,7 +18,7 @@ from conftest import make_view
 from pin_match import Target, create_matcher
 from pin_match.data.synth import DEFAULTS, generate
 from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 
 
 @pytest.fixture(scope="module")
@@ -28,7 +28,8 @@ def ranking_set(tmp_path_factory):
 
 @pytest.mark.parametrize("name", ["sift", "color"])
 def test_scores_rank_target_above_lookalikes_above_nothing(name, ranking_set, tmp_path):
-    scored = scored_frames(frame_labels(ranking_set), score(ranking_set, name, out=tmp_path, progress=False))
+    table = score(ranking_set, name, out=tmp_path, run=RunOptions(progress=False))
+    scored = scored_frames(frame_labels(ranking_set), table)
     target = scored.target_visible
     lookalike = ~target & scored.same_visible
     nothing = ~target & ~scored.same_visible & ~scored.other_visible

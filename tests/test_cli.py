@@ -191,3 +191,65 @@ def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
     assert "AUROC-same" in real and "color@" in real and "n/a" not in real.split("\n| color@")[1].split("\n")[0]
     assert "build look-alike set" in out and "score color (look-alikes)" in out
     assert (tmp_path / "demo" / "lookalikes" / "table.md").is_file()
+
+
+def test_bench_configures_each_matcher_by_name(tiny_frameset, tmp_path, capsys):
+    """--cfg MATCHER:KEY=VALUE reaches that matcher only (its id changes), the others keep their defaults."""
+    from pin_match.contract.registry import create_matcher
+
+    rc, out, err = _run(capsys, "bench", tiny_frameset.root, "--matcher", "color", "--matcher", "sift",
+                        "--cfg", "color:stride=8", "--out", tmp_path / "b", "--workers", "1", "--quiet")
+    assert rc == 0, err
+    assert f"| {create_matcher('color', stride=8).id} |" in out and f"| {create_matcher('sift').id} |" in out
+    assert create_matcher("color").id not in out
+    rc, _, err = _run(capsys, "bench", tiny_frameset.root, "--matcher", "color", "--cfg", "stride=8")
+    assert rc == 2 and "expected MATCHER:KEY=VALUE" in err
+    rc, _, err = _run(capsys, "bench", tiny_frameset.root, "--matcher", "color", "--cfg", "colour:stride=8",
+                      "--out", tmp_path / "c")
+    assert rc == 2 and "overrides for colour, which is not among the benched matchers (color)" in err
+    assert not (tmp_path / "c").exists()  # refused before scoring anything
+
+
+def test_run_options_mean_the_same_in_every_command(tiny_frameset):
+    """--batch-size / --workers / --quiet are one definition, read back as one RunOptions."""
+    from pin_match.cli.args import run_options
+    from pin_match.scoring import RunOptions
+
+    parser = build_parser()
+    fs = str(tiny_frameset.root)
+    given = ["--batch-size", "4", "--workers", "3", "--quiet"]
+    assert run_options(parser.parse_args(["score", fs, "--matcher", "color", *given])) == RunOptions(4, 3, False)
+    assert run_options(parser.parse_args(["bench", fs, "--matcher", "color", *given])) == RunOptions(4, 3, False)
+    assert run_options(parser.parse_args(["demo", *given])) == RunOptions(4, 3, False)
+    assert run_options(parser.parse_args(["bench", fs, "--matcher", "color"])) == RunOptions()
+    assert run_options(parser.parse_args(["train", fs, "--out", "h", "--quiet"])) == RunOptions(progress=False)
+
+
+def test_train_flags_are_the_train_config_fields(tiny_frameset):
+    """One flag per TrainConfig field, defaulting to the field's default; a flag sets its field, nothing else."""
+    import dataclasses
+
+    from pin_match.cli.args import dataclass_values
+    from pin_match.training.config import TrainConfig
+
+    train = _subparsers(build_parser())["train"]
+    flags = {a.dest: a for a in train._actions}
+    for field in dataclasses.fields(TrainConfig):
+        assert flags[field.name].default == getattr(TrainConfig(), field.name), field.name
+    args = train.parse_args([str(tiny_frameset.root), "--out", "h", "--weight-decay", "0.01", "--objective", "f1"])
+    assert dataclass_values(args, TrainConfig) == TrainConfig(weight_decay=0.01, objective="f1")
+    with pytest.raises(SystemExit):
+        train.parse_args([str(tiny_frameset.root), "--out", "h", "--objective", "accuracy"])
+
+
+def test_the_default_score_folder_has_one_name():
+    """score writes where tune / report look and where the library writes: pin_match.outputs.SCORES."""
+    import inspect
+
+    from pin_match import outputs
+    from pin_match.scoring import score_to_file
+
+    commands = _subparsers(build_parser())
+    defaults = [commands["score"].get_default("out"), commands["tune"].get_default("cache"),
+                commands["report"].get_default("cache"), inspect.signature(score_to_file).parameters["out"].default]
+    assert defaults == [outputs.SCORES] * 4

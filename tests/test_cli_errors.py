@@ -36,6 +36,9 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["similarity", fs, "--matcher", "color", "--split", "no-such-split"],
         ["bench", missing, "--matcher", "color"],
         ["bench", fs, "--matcher", "no-such-matcher"],
+        ["bench", fs, "--matcher", "color", "--cfg", "stride=8"],  # bench's --cfg names its matcher
+        ["bench", fs, "--matcher", "color", "--cfg", "sift:ratio=0.7", "--out", f"{tmp}/b"],
+        ["bench", fs, "--matcher", "color", "--cfg", "color:no_such_key=1", "--out", f"{tmp}/b"],
         ["demo", "--matcher", "no-such-matcher", "--out", f"{tmp}/demo"],
         ["features", fs, "--backbone", "color"],
         ["features", missing, "--backbone", "effnet"],

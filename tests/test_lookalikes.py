@@ -210,9 +210,9 @@ def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_past
 def test_default_effnet_tells_real_instances_from_real_lookalikes(shipped_pasted, tmp_path):
     from pin_match.evaluation.labels import frame_labels, scored_frames
     from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
-    from pin_match.scoring import score
+    from pin_match.scoring import RunOptions, score
 
-    table = score(shipped_pasted, "effnet", out=tmp_path, progress=False)
+    table = score(shipped_pasted, "effnet", out=tmp_path, run=RunOptions(progress=False))
     metrics = ranking_metrics(frame_arrays(scored_frames(frame_labels(shipped_pasted), table)))
     assert metrics["auroc_same"] > MIN_LOOKALIKE_AUROC_SAME, metrics
     assert metrics["auroc_target"] > MIN_LOOKALIKE_AUROC_ALL, metrics

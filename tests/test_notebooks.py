@@ -14,6 +14,7 @@ import pytest
 from pin_match.data.synth import generate
 from pin_match.evaluation.analysis import AnalysisError, load_bench
 from pin_match.evaluation.bench import bench
+from pin_match.scoring import RunOptions
 
 REPO = Path(__file__).resolve().parents[1]
 NOTEBOOKS = sorted((REPO / "notebooks").glob("[0-9][0-9]_*.ipynb"))
@@ -27,7 +28,7 @@ def bench_run(tmp_path_factory):
     """A demo-shaped folder: run/frameset (synthetic) plus bench's scores, thresholds and reports."""
     run = tmp_path_factory.mktemp("nb") / "run"
     generate(run / "frameset", seed=1, episodes=4, objects_per_category=4, frames_per_episode=8, workers=1)
-    bench(run / "frameset", MATCHERS, run, n_boot=50, workers=1, progress=False)
+    bench(run / "frameset", MATCHERS, run, n_boot=50, run=RunOptions(workers=1, progress=False))
     return run
 
 

@@ -167,9 +167,9 @@ def test_a_square_is_one_crop_for_every_crop_policy(tiny_frameset):
 # ---------------------------------------------------------------------- detector: sigma and construction
 def test_sigma_from_a_tuned_file_the_paper_or_given(tiny_frameset, tmp_path):
     from pin_match.evaluation.tuning import tune, write_thresholds
-    from pin_match.scoring import score
+    from pin_match.scoring import RunOptions, score
 
-    table = score(tiny_frameset, "color", out=tmp_path / "scores", progress=False)
+    table = score(tiny_frameset, "color", out=tmp_path / "scores", run=RunOptions(progress=False))
     tuned = tune(table, tiny_frameset, objective="f1", split="train")
     path = write_thresholds(tuned, tmp_path / "color.json")
     detector = PinDetector("color", thresholds=path)
@@ -285,9 +285,9 @@ def assert_same_frameset(source: FrameSet, imported: FrameSet) -> None:
 
 def metrics_of(fs: FrameSet, out) -> dict:
     from pin_match.evaluation import split_frames
-    from pin_match.scoring import score
+    from pin_match.scoring import RunOptions, score
 
-    scored = split_frames(score(fs, "color", out=out, progress=False), fs, None)
+    scored = split_frames(score(fs, "color", out=out, run=RunOptions(progress=False)), fs, None)
     return {sigma: detection_metrics(scored, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
 
 

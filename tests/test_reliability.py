@@ -22,7 +22,7 @@ from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_m
 from pin_match.cli import main
 from pin_match.data.frameset import FrameSet
 from pin_match.data.writer import FrameSetWriter
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 from pin_match.scoring.table import ScoreTable, ScoreTableError
 
 
@@ -120,7 +120,7 @@ def test_non_finite_scores_name_the_matcher_and_frames(tiny_frameset, tmp_path, 
 
 
 def test_score_table_with_nan_refused(tiny_frameset, tmp_path, capsys):
-    table = score(tiny_frameset, "color", out=tmp_path / "s", progress=False)
+    table = score(tiny_frameset, "color", out=tmp_path / "s", run=RunOptions(progress=False))
     frames = table.frames.copy()
     frames.loc[3, "score"] = np.nan
     ScoreTable(frames, table.meta).write(tmp_path / "nan.parquet")
@@ -147,7 +147,7 @@ def test_grayscale_and_unexpected_size_frames_are_scored(tmp_path):
     assert cv2.imread(str(gray), cv2.IMREAD_UNCHANGED).ndim == 2
     fs = FrameSet.load(tmp_path / "odd")
     for name in ("color", "sift"):
-        table = score(fs, name, out=tmp_path / "out", progress=False)
+        table = score(fs, name, out=tmp_path / "out", run=RunOptions(progress=False))
         assert len(table.frames) == 3 and np.isfinite(table.frames.score).all()
         for fid, x, y in zip(table.frames.frame_id, table.frames.points_x, table.frames.points_y):
             h, w_ = fs.image(fid).shape[:2]
@@ -210,12 +210,12 @@ def test_disk_full_while_writing_the_cache_then_resume(tiny_frameset, tmp_path, 
 
     monkeypatch.setattr(pq, "write_table", write_half_then_fail)
     with pytest.raises(OSError, match="No space left on device"):
-        score(tiny_frameset, "color", out=out, progress=False)
+        score(tiny_frameset, "color", out=out, run=RunOptions(progress=False))
     assert [p.name for p in out.rglob("chunks/*.parquet")] == ["ep_train.parquet"]
     assert not list(out.rglob("*.tmp")) and not list(out.rglob("*.lock"))
     monkeypatch.setattr(pq, "write_table", real)  # space freed
-    resumed = score(tiny_frameset, "color", out=out, progress=False)
-    reference = score(tiny_frameset, "color", out=tmp_path / "ref", progress=False)
+    resumed = score(tiny_frameset, "color", out=out, run=RunOptions(progress=False))
+    reference = score(tiny_frameset, "color", out=tmp_path / "ref", run=RunOptions(progress=False))
     assert next(out.rglob("scores_all.parquet")).read_bytes() == \
         next((tmp_path / "ref").rglob("scores_all.parquet")).read_bytes()
     assert resumed.frames.equals(reference.frames)

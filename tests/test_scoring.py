@@ -13,8 +13,10 @@ import numpy as np
 import pytest
 import slow_plugin  # noqa: F401  (registers test-slow)
 
-from pin_match.scoring import Shard, merge, score
+from pin_match.scoring import RunOptions, Shard, merge, score
 from pin_match.scoring.table import ScoreTable
+
+QUIET = RunOptions(progress=False)
 
 TESTS = Path(__file__).parent
 
@@ -28,7 +30,7 @@ def _cli(args: list[str], env_extra: dict | None = None) -> subprocess.Popen:
 
 
 def test_table_contents(tiny_frameset, tmp_path):
-    t = score(tiny_frameset, "color", out=tmp_path, progress=False)
+    t = score(tiny_frameset, "color", out=tmp_path, run=QUIET)
     assert list(t.frames.frame_id) == sorted(tiny_frameset.frames.frame_id)
     assert t.meta["frameset_fingerprint"] == tiny_frameset.fingerprint
     assert t.meta["matcher_id"] == f"color@{t.meta['config_hash']}"
@@ -43,18 +45,18 @@ def test_table_contents(tiny_frameset, tmp_path):
 def test_rerun_hits_the_cache_and_a_new_config_does_not(tiny_frameset, tmp_path, monkeypatch):
     log = tmp_path / "log.txt"
     monkeypatch.setenv("PIN_MATCH_TEST_LOG", str(log))
-    first = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, progress=False)
+    first = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, run=QUIET)
     n = len(log.read_text().splitlines())
-    again = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, progress=False)
+    again = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path, run=QUIET)
     assert len(log.read_text().splitlines()) == n == 2  # no target prepared twice, nothing rescored
     assert again.frames.equals(first.frames)
-    other = score(tiny_frameset, "test-slow", overrides={"delay": 0.001}, out=tmp_path, progress=False)
+    other = score(tiny_frameset, "test-slow", overrides={"delay": 0.001}, out=tmp_path, run=QUIET)
     assert other.meta["config_hash"] != first.meta["config_hash"]
     assert len(log.read_text().splitlines()) == 4
 
 
 def test_split_scores_only_that_split(tiny_frameset, tmp_path):
-    t = score(tiny_frameset, "color", split="val", out=tmp_path, progress=False)
+    t = score(tiny_frameset, "color", split="val", out=tmp_path, run=QUIET)
     assert set(t.frames.split) == {"val"} and len(t.frames) == 4
 
 
@@ -62,8 +64,8 @@ def test_shards_merge_to_the_unsharded_table(tiny_frameset, tmp_path):
     assert Shard.parse("1/3").select(list("abcdefg")) == ["b", "e"]
     with pytest.raises(ValueError, match="0 <= i < n"):
         Shard.parse("3/3")
-    full = score(tiny_frameset, "color", out=tmp_path / "full", progress=False)
-    parts = [score(tiny_frameset, "color", out=tmp_path / f"s{i}", shard=f"{i}/2", progress=False) for i in range(2)]
+    full = score(tiny_frameset, "color", out=tmp_path / "full", run=QUIET)
+    parts = [score(tiny_frameset, "color", out=tmp_path / f"s{i}", shard=f"{i}/2", run=QUIET) for i in range(2)]
     assert [len(p.frames) for p in parts] == [4, 4]
     paths = sorted((tmp_path).glob("s*/*/*/scores_all_shard*.parquet"))
     merged = merge(paths, tmp_path / "merged.parquet")
@@ -107,7 +109,7 @@ def test_two_processes_share_one_cache(tiny_frameset, tmp_path):
     procs = [_cli(args, {"PIN_MATCH_TEST_LOG": str(log)}) for _ in range(2)]
     for p in procs:
         assert p.wait(timeout=120) == 0, p.stderr.read().decode()
-    ref = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "ref", progress=False)
+    ref = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "ref", run=QUIET)
     got = ScoreTable.read(next((tmp_path / "shared").glob("*/*/scores_all.parquet")))
     assert np.array_equal(got.frames.score.to_numpy(), ref.frames.score.to_numpy())
     prepared = [line.split()[-1] for line in log.read_text().splitlines()]
@@ -117,7 +119,7 @@ def test_two_processes_share_one_cache(tiny_frameset, tmp_path):
 
 def test_an_empty_lock_left_by_a_kill_is_taken_over(tiny_frameset, tmp_path):
     """A process killed between creating a lock and writing its pid leaves an empty lock: not held forever."""
-    ref = score(tiny_frameset, "color", out=tmp_path / "ref", progress=False)
+    ref = score(tiny_frameset, "color", out=tmp_path / "ref", run=QUIET)
     (chunks,) = [p / "chunks" for p in (tmp_path / "ref").glob("*/*")]
     for chunk in chunks.glob("*.parquet"):
         chunk.unlink()
@@ -127,6 +129,6 @@ def test_an_empty_lock_left_by_a_kill_is_taken_over(tiny_frameset, tmp_path):
     (table,) = (tmp_path / "ref").glob("*/*/scores_all.parquet")
     table.unlink()
     start = time.monotonic()
-    again = score(tiny_frameset, "color", out=tmp_path / "ref", progress=False)
+    again = score(tiny_frameset, "color", out=tmp_path / "ref", run=QUIET)
     assert time.monotonic() - start < 60 and again.frames.equals(ref.frames)
     assert not lock.exists()

@@ -24,7 +24,7 @@ from pin_match.contract.weights import WeightsError
 from pin_match.data.writer import FrameSetWriter
 from pin_match.matchers.patch import alpha_to_grid
 from pin_match.nn.head import ProjectionHead, load_head
-from pin_match.scoring import score
+from pin_match.scoring import RunOptions, score
 from pin_match.training import TrainConfig, TrainingError, store_frame_scores, train
 
 FAST = dict(hidden=16, batch_crops=4, patience=100, threads=1)
@@ -142,7 +142,7 @@ def test_matcher_and_head_share_one_prototype_rule_to_float_precision(head_dir):
 
 def test_the_learned_matcher_scores_like_the_store(head_dir, store, tiny_frameset, tmp_path):
     table = score(tiny_frameset, "learned", overrides=dict(weights=str(head_dir)), split="val", out=tmp_path,
-                  progress=False)
+                  run=RunOptions(progress=False))
     head, config = load_head(head_dir)
     expected = store_frame_scores(store, tiny_frameset, head, "val").set_index("frame_id").score
     got = table.frames.set_index("frame_id").score
@@ -158,7 +158,7 @@ def test_the_learned_matcher_scores_like_the_store(head_dir, store, tiny_framese
 
 def test_the_frozen_matcher_scores_like_the_store(store, tiny_frameset, dino_cfg, tmp_path):
     """Training's comparison scores frames by the matcher's own rule: the store's frozen scores are the matcher's."""
-    table = score(tiny_frameset, "dino", overrides=dino_cfg, split="val", out=tmp_path, progress=False)
+    table = score(tiny_frameset, "dino", overrides=dino_cfg, split="val", out=tmp_path, run=RunOptions(progress=False))
     expected = store_frame_scores(store, tiny_frameset, None, "val").set_index("frame_id").score
     got = table.frames.set_index("frame_id").score
     assert len(expected) == len(got) > 1 and expected.nunique() > 1

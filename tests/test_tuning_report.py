@@ -195,3 +195,43 @@ def test_side_by_side_tables():
     assert r"a@1 & 0.5 & tuned: f1 on train & 55.74 & 55.33 & 42.00 & 2.67" in tex and r"\caption{val}" in tex
     with pytest.raises(KeyError):  # a dict is not a row: side_by_side never guesses what it was given
         report_row(dict(matcher_id="c@3", sigma=1.0, metrics_at_sigma={}))
+
+
+def _count_calls(monkeypatch, function) -> list:
+    """Wrap ``function`` wherever pin_match.evaluation imported it by name; the list grows by one per call."""
+    import sys
+
+    calls = []
+
+    def counting(*args, **kwargs):
+        calls.append(args)
+        return function(*args, **kwargs)
+
+    for name, module in list(sys.modules.items()):
+        if name.startswith("pin_match.evaluation") and getattr(module, function.__name__, None) is function:
+            monkeypatch.setattr(module, function.__name__, counting)
+    return calls
+
+
+def test_bench_builds_labels_once_and_arrays_once_per_split(tiny_frameset, tmp_path, monkeypatch):
+    """Two matchers, tuned on train and reported on val: one label table, one FrameArrays per matcher and split."""
+    from pin_match.evaluation.bench import bench  # imported before the wrappers go in
+    from pin_match.evaluation.metrics import frame_arrays
+    from pin_match.scoring import RunOptions
+
+    labels = _count_calls(monkeypatch, frame_labels)
+    arrays = _count_calls(monkeypatch, frame_arrays)
+    joint, results = bench(tiny_frameset, ["color", "sift"], tmp_path, n_boot=10,
+                           run=RunOptions(workers=1, progress=False))
+    assert len(labels) == 1
+    assert len(arrays) == 2 * 2
+    assert [r["matcher"] for r in results] == ["color", "sift"] and len(joint) == 2
+
+
+def test_report_with_the_callers_labels_equals_report_without(tiny_frameset, tmp_path):
+    table = make_table(tiny_frameset, tmp_path)
+    alone = report(table, tiny_frameset, tmp_path / "a", sigma=0.5, n_boot=20)
+    given = report(table, tiny_frameset, tmp_path / "b", sigma=0.5, n_boot=20, labels=frame_labels(tiny_frameset))
+    assert (alone["metrics"], alone["ci95"]) == (given["metrics"], given["ci95"])
+    tuned = tune(table, tiny_frameset, labels=frame_labels(tiny_frameset))
+    assert tuned["metrics_at_sigma"] == tune(table, tiny_frameset)["metrics_at_sigma"]

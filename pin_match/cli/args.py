@@ -1,10 +1,20 @@
-"""Arguments several commands share, defined once: a matcher's config (--cfg, --weights), workers, quiet."""
+"""Arguments several commands share, each defined once: a matcher's config, run options, a dataclass's fields.
+
+Every ``add_*`` has its reader (``matcher_overrides``, ``bench_overrides``, ``run_options``,
+``dataclass_values``), so a command never spells a shared flag or its default itself.
+"""
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
+import typing
+from collections.abc import Sequence
+from typing import Any
 
+from pin_match.contract.matcher import ConfigError
 from pin_match.contract.registry import parse_overrides, with_weights
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 
 
 def add_matcher_config(s: argparse.ArgumentParser, whose: str = "the matcher's") -> None:
@@ -18,6 +28,55 @@ def matcher_overrides(a: argparse.Namespace) -> dict:
     return with_weights(parse_overrides(a.cfg), a.weights)
 
 
-def add_run_options(s: argparse.ArgumentParser, workers_help: str) -> None:
-    s.add_argument("--workers", type=int, help=workers_help)
+def add_bench_config(s: argparse.ArgumentParser) -> None:
+    """--cfg MATCHER:KEY=VALUE (repeatable): several matchers run side by side, so each pair names its matcher."""
+    s.add_argument("--cfg", action="append", metavar="MATCHER:KEY=VALUE",
+                   help="config override of one benched matcher, e.g. effnet:img_size=224 or "
+                        "effnet:weights=PATH (repeatable)")
+
+
+def bench_overrides(pairs: Sequence[str] | None) -> dict[str, dict[str, str]]:
+    """The overrides of ``add_bench_config`` by matcher name; the name ends at the first ':' before any '='."""
+    grouped: dict[str, list[str]] = {}
+    for pair in pairs or []:
+        name, sep, rest = pair.partition(":")
+        if not sep or not name or "=" in name:
+            raise ConfigError(f"--cfg {pair!r}: expected MATCHER:KEY=VALUE (bench runs several matchers), "
+                              "e.g. effnet:img_size=224")
+        grouped.setdefault(name.strip(), []).append(rest)
+    return {name: parse_overrides(rest) for name, rest in grouped.items()}
+
+
+def add_run_options(s: argparse.ArgumentParser, *, workers: str | None, batch_size: bool = True) -> None:
+    """--quiet, and --batch-size and --workers (help: ``workers``) where the command has them: a ``RunOptions``."""
+    if batch_size:
+        s.add_argument("--batch-size", type=int, default=DEFAULT_RUN.batch_size,
+                       help=f"frames per matcher call (default {DEFAULT_RUN.batch_size})")
+    if workers is not None:
+        s.add_argument("--workers", type=int, help=workers)
     s.add_argument("--quiet", action="store_true", help="no progress bars")
+
+
+def run_options(a: argparse.Namespace) -> RunOptions:
+    """The ``RunOptions`` of ``add_run_options``; an option the command lacks keeps its default."""
+    given = {name: getattr(a, name) for name in ("batch_size", "workers") if hasattr(a, name)}
+    return RunOptions(**given, progress=not a.quiet)
+
+
+def add_dataclass_flags(s: argparse.ArgumentParser, cls: type, choices: dict[str, Sequence[str]] | None = None) -> None:
+    """One --flag per field of a dataclass (its ``metadata["help"]``, typed and defaulted by the field itself).
+
+    The flags cannot drift from the class: a new field is a new flag, a changed default shows in
+    the help. ``choices`` restricts fields whose valid values live in another layer.
+    """
+    defaults = cls()
+    hints = typing.get_type_hints(cls)
+    for f in dataclasses.fields(cls):
+        default = getattr(defaults, f.name)
+        s.add_argument(f"--{f.name.replace('_', '-')}", type=hints[f.name], default=default,
+                       choices=(choices or {}).get(f.name), help=f"{f.metadata['help']} (default {default})")
+
+
+def dataclass_values(a: argparse.Namespace, cls: type) -> Any:
+    """The dataclass built from the flags of ``add_dataclass_flags``."""
+    return cls(**{f.name: getattr(a, f.name) for f in dataclasses.fields(cls)})

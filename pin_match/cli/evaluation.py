@@ -1,8 +1,9 @@
 """The evaluation half of the CLI: tune, report, similarity, bench, demo (no model needed except similarity).
 
 ``tune`` and ``report`` take a score table by path or find it in the score cache from
-``--frameset`` and ``--matcher`` (the same ``--cfg`` / ``--weights`` as ``score``). Every
-command prints the sigma it used and where it came from.
+``--frameset`` and ``--matcher`` (the same ``--cfg`` / ``--weights`` as ``score``); ``bench``
+configures each of its matchers with ``--cfg MATCHER:KEY=VALUE``. Every command prints the
+sigma it used and where it came from.
 """
 
 from __future__ import annotations
@@ -11,13 +12,20 @@ import argparse
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides
+from pin_match.cli.args import (
+    add_bench_config,
+    add_matcher_config,
+    add_run_options,
+    bench_overrides,
+    matcher_overrides,
+    run_options,
+)
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.scoring.cache import cache_dir
 from pin_match.scoring.table import ScoreTable
 
-SCORE_CACHE = outputs.SCORES
+WORKERS_HELP = "worker processes/threads (default: up to 2 for scoring, all cores for rendering)"
 
 
 class UsageError(PinMatchError, ValueError):
@@ -91,7 +99,7 @@ def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.tables import markdown_table
 
     joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
-                     batch_size=a.batch_size, workers=a.workers, progress=not a.quiet)
+                     overrides=bench_overrides(a.cfg), run=run_options(a))
     print(markdown_table(joint))
     if len(a.matcher) > 1:
         from pin_match.evaluation.compare import compare_bench
@@ -108,7 +116,7 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     watch = Stopwatch()
     real = () if a.no_lookalikes else (a.lookalike_matcher or LOOKALIKE_MATCHERS)
     tables, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, lookalike_matchers=real, seed=a.seed,
-                       workers=a.workers, progress=not a.quiet, watch=watch)
+                       run=run_options(a), watch=watch)
     captions = {"synthetic": "the synthetic val split (rendered PIN-like rooms)",
                 "look-alikes": "real photos: val instances of CORe50 objects pasted into real rooms, each target "
                                "among real look-alikes of its category (AUROC-same: target vs look-alike frames)"}
@@ -126,8 +134,8 @@ def _table_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("--frameset", type=Path, required=True, help="the frame-set the scores were computed on")
     s.add_argument("--matcher", help="find the table of this matcher for --frameset in --cache instead of a path")
     add_matcher_config(s, "with --matcher: as given to `pin-match score`,")
-    s.add_argument("--cache", type=Path, default=SCORE_CACHE,
-                   help=f"with --matcher: the score cache (the --out of `pin-match score`; default {SCORE_CACHE})")
+    s.add_argument("--cache", type=Path, default=outputs.SCORES,
+                   help=f"with --matcher: the score cache (the --out of `pin-match score`; default {outputs.SCORES})")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -178,8 +186,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--sigma-from", default="train", metavar="SPLIT|default|paper",
                    help="tune sigma on this split (default train), or use each matcher's 'default' or the 'paper' "
                         "sigma; the tables say which")
-    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
-    _run_arguments(s)
+    add_bench_config(s)
+    add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_bench)
 
     s = sub.add_parser("demo", help="the whole job on the synthetic default frame-set (generated if absent)")
@@ -190,9 +198,5 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--no-lookalikes", action="store_true", help="the synthetic set only")
     s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
     s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")
-    _run_arguments(s)
+    add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_demo)
-
-
-def _run_arguments(s: argparse.ArgumentParser) -> None:
-    add_run_options(s, "worker processes/threads (default: up to 2 for scoring, all cores for rendering)")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pin_match import outputs
 from pin_match.cli import evaluation, pages, training
-from pin_match.cli.args import add_matcher_config, matcher_overrides
+from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
 from pin_match.errors import PinMatchError
 
 IMPORT_HELP = """Build a frame-set from a PIN recording and the PInNED objects folder.
@@ -40,7 +40,7 @@ def _cmd_synth(a: argparse.Namespace) -> None:
     kwargs = {k: v for k, v in dict(seed=a.seed, episodes=a.episodes, objects_per_category=a.objects_per_category,
                                     frames_per_episode=a.frames_per_episode, workers=a.workers).items()
               if v is not None}
-    fs = generate(a.out, overwrite=a.overwrite, **kwargs)
+    fs = generate(a.out, overwrite=a.overwrite, progress=run_options(a).progress, **kwargs)
     print(f"wrote {fs}")
 
 
@@ -83,8 +83,7 @@ def _cmd_score(a: argparse.Namespace) -> None:
 
     from pin_match.scoring import read_meta, score_to_file
 
-    kwargs = dict(overrides=matcher_overrides(a), split=a.split, out=a.out,
-                  batch_size=a.batch_size, shard=a.shard, workers=a.workers, progress=not a.quiet)
+    kwargs = dict(overrides=matcher_overrides(a), split=a.split, out=a.out, shard=a.shard, run=run_options(a))
     if a.scheduler:
         from pin_match.scoring.cluster import connect
 
@@ -121,7 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--episodes", type=int, help="episodes, half train and half val (default 24)")
     s.add_argument("--objects-per-category", type=int, help="object instances per category (default 10)")
     s.add_argument("--frames-per-episode", type=int, help="camera frames per episode (default 32)")
-    s.add_argument("--workers", type=int, help="rendering processes (default: all cores); output is the same")
+    add_run_options(s, workers="rendering processes (default: all cores); output is the same", batch_size=False)
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_synth)
 
@@ -180,11 +179,9 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--split", help="score only this split (default: every frame)")
     s.add_argument("--out", type=Path, default=outputs.SCORES,
                    help="score cache; the table goes to <out>/<matcher@hash>/<fingerprint>/ and its path is printed")
-    s.add_argument("--batch-size", type=int, default=8, help="frames per matcher call (default 8)")
     s.add_argument("--shard", help="i/n: score a deterministic part (join the parts with `pin-match merge`)")
-    s.add_argument("--workers", type=int, help="threads decoding and scoring frames (default up to 2); "
-                                                    "with --scheduler local, worker processes")
-    s.add_argument("--quiet", action="store_true", help="no progress bar")
+    add_run_options(s, workers="threads decoding and scoring frames (default up to 2); with --scheduler local, "
+                               "worker processes")
     s.add_argument("--scheduler", metavar="local|ADDRESS",
                    help="score on Dask distributed: 'local' starts --workers worker processes here; else a "
                         "scheduler address (tcp://host:8786) or scheduler JSON file; same cache and table")

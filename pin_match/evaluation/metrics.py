@@ -90,6 +90,18 @@ def frame_arrays(scored: pd.DataFrame) -> FrameArrays:
                        categories=scored["target_category"].iloc[first_rows].to_numpy())
 
 
+Scored = pd.DataFrame | FrameArrays  # a scored-frame table, or its arrays when the caller already has them
+
+
+def as_arrays(scored: Scored) -> FrameArrays:
+    """The arrays of a scored split: converted (validated, sorted) here, or passed through when already converted.
+
+    Tuning and reporting compute several metrics of one split; converting it once and passing the
+    arrays to each keeps the sort and the finiteness check to one per split.
+    """
+    return scored if isinstance(scored, FrameArrays) else frame_arrays(scored)
+
+
 def episode_counts(arr: FrameArrays, sigma: float) -> dict[str, np.ndarray]:
     """Every count of ``COUNT_KEYS`` per episode (arrays of length n_episodes) at threshold sigma."""
     n = arr.n_episodes
@@ -149,9 +161,9 @@ def threshold_metrics(arr: FrameArrays, sigma: float) -> dict[str, float]:
     return {**c, **{k: float(v) for k, v in ratios(c).items()}}
 
 
-def detection_metrics(scored: pd.DataFrame, sigma: float) -> dict[str, float | int | None]:
+def detection_metrics(scored: Scored, sigma: float) -> dict[str, float | int | None]:
     """Every metric of one matcher at threshold sigma (score >= sigma is matched); None = undefined."""
-    arr = frame_arrays(scored)
+    arr = as_arrays(scored)
     out: dict[str, float | int | None] = {"sigma": float(sigma)}
     values = {**threshold_metrics(arr, sigma), **ranking_metrics(arr)}
     for k, v in values.items():
@@ -159,9 +171,9 @@ def detection_metrics(scored: pd.DataFrame, sigma: float) -> dict[str, float | i
     return out
 
 
-def per_category(scored: pd.DataFrame, sigma: float) -> pd.DataFrame:
+def per_category(scored: Scored, sigma: float) -> pd.DataFrame:
     """The metrics per target category (rows, sorted), from the episodes whose target is of it."""
-    arr = frame_arrays(scored)
+    arr = as_arrays(scored)
     counts = pd.DataFrame(episode_counts(arr, sigma))
     counts["category"] = arr.categories
     sums = counts.groupby("category", sort=True).sum(min_count=1)
@@ -230,7 +242,7 @@ def localisation_metrics(hits: pd.DataFrame) -> dict[str, float | None]:
                 n_localised_frames=n_frames)
 
 
-def bootstrap_ci(scored: pd.DataFrame, sigma: float, *, n_boot: int = 1000, seed: int = 0,
+def bootstrap_ci(scored: Scored, sigma: float, *, n_boot: int = 1000, seed: int = 0,
                  level: float = 0.95) -> dict[str, list[float] | None]:
     """Percentile confidence intervals of ``METRIC_KEYS``, resampling whole episodes with replacement.
 
@@ -238,7 +250,7 @@ def bootstrap_ci(scored: pd.DataFrame, sigma: float, *, n_boot: int = 1000, seed
     correlated). Resamples where a metric is undefined are left out of its interval; a
     metric undefined in every resample has no interval (None).
     """
-    arr = frame_arrays(scored)
+    arr = as_arrays(scored)
     per_episode = episode_counts(arr, sigma)
     matrix = np.stack([per_episode[k] for k in COUNT_KEYS], axis=1)  # episodes x counts
     rng = np.random.default_rng(seed)

@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
-from pin_match.evaluation.metrics import CLASSES, frame_arrays
+from pin_match.evaluation.metrics import CLASSES, Scored, as_arrays
 
 MAX_PLOT_POINTS = 2000
 TITLE_WIDTH = 0.96  # share of the figure's width a title line may take
@@ -90,9 +90,9 @@ def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title
     _figure(Path(path), title, draw)
 
 
-def plot_score_distributions(scored: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
+def plot_score_distributions(scored: Scored, sigma: float, path: str | Path, title: str = "") -> None:
     """Score histograms of frames by what they show (target, same-category, other distractor, nothing)."""
-    arr = frame_arrays(scored)
+    arr = as_arrays(scored)
     bins = np.linspace(arr.score.min(), arr.score.max(), 50) if arr.score.size and np.ptp(arr.score) > 0 else 10
     names = dict(zip(CLASSES, ("target", "same category", "other distractor", "nothing")))
 

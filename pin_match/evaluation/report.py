@@ -11,6 +11,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pandas as pd
+
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.evaluator import evaluate
@@ -26,16 +28,17 @@ FILES = ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma
 
 
 def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float | SigmaChoice | None = None,
-           thresholds: str | Path | None = None, split: str | None = "val", n_boot: int = 1000,
-           seed: int = 0) -> dict:
+           thresholds: str | Path | None = None, split: str | None = "val", labels: pd.DataFrame | None = None,
+           n_boot: int = 1000, seed: int = 0) -> dict:
     """Evaluate at one sigma and write the report folder; returns metrics.json's content plus ``files``.
 
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
-    or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
+    or None: then ``thresholds`` (a file, or "paper"), else the matcher's default. ``labels``:
+    ``frame_labels(fs)`` when the caller already has them.
     """
     choice = sigma if isinstance(sigma, SigmaChoice) else \
         resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
-    result, categories, scored = evaluate(table, fs, choice, split, n_boot=n_boot, seed=seed)
+    result, categories, scored = evaluate(table, fs, choice, split, labels=labels, n_boot=n_boot, seed=seed)
     out = Path(out_dir)
     files = [out / name for name in FILES]
     atomic.write_json(files[0], result)

@@ -31,7 +31,8 @@ from pin_match.evaluation.metrics import (
     OM,
     TM,
     FrameArrays,
-    frame_arrays,
+    Scored,
+    as_arrays,
     ratios,
     threshold_metrics,
 )
@@ -76,16 +77,15 @@ def sweep_counts(arr: FrameArrays) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return values, counts
 
 
-def sweep(scored: pd.DataFrame | FrameArrays) -> pd.DataFrame:
+def sweep(scored: Scored) -> pd.DataFrame:
     """One row per distinct score, ascending: sigma, every count and every threshold metric (NaN = undefined)."""
-    arr = scored if isinstance(scored, FrameArrays) else frame_arrays(scored)
-    values, counts = sweep_counts(arr)
+    values, counts = sweep_counts(as_arrays(scored))
     return pd.DataFrame({"sigma": values, **counts, **ratios(counts)}, copy=False)  # no 25-column consolidation
 
 
-def sweep_loop(scored: pd.DataFrame | FrameArrays, sigmas: Sequence[float] | np.ndarray | None = None) -> pd.DataFrame:
+def sweep_loop(scored: Scored, sigmas: Sequence[float] | np.ndarray | None = None) -> pd.DataFrame:
     """The same table, one full pass over the frames per threshold (default: every distinct score)."""
-    arr = scored if isinstance(scored, FrameArrays) else frame_arrays(scored)
+    arr = as_arrays(scored)
     sigmas = np.unique(arr.score) if sigmas is None else np.asarray(sigmas, np.float64)
     rows = [{"sigma": float(s), **threshold_metrics(arr, float(s))} for s in sigmas]
     return pd.DataFrame(rows, columns=["sigma", *COUNT_KEYS, *METRIC_KEYS])

@@ -21,7 +21,7 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.evaluator import split_frames
-from pin_match.evaluation.metrics import detection_metrics
+from pin_match.evaluation.metrics import detection_metrics, frame_arrays
 from pin_match.evaluation.sweep import sweep
 from pin_match.scoring.table import ScoreTable
 
@@ -73,20 +73,21 @@ def choose_sigma(table: pd.DataFrame, objective: str, match_floor: float = DEFAU
 
 
 def tune(table: ScoreTable, fs: FrameSet, objective: str = DEFAULT_OBJECTIVE, split: str = "train",
-         match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
+         match_floor: float = DEFAULT_MATCH_FLOOR, labels: pd.DataFrame | None = None) -> dict:
     """Pick sigma for ``table``'s matcher on one split of ``fs``; the result is what ``write_thresholds`` stores.
 
     The table must have been scored on ``fs``; a split it lacks is an error that says how to go on
-    (another split, an explicit sigma or the paper's).
+    (another split, an explicit sigma or the paper's). ``labels``: ``frame_labels(fs)`` when the
+    caller already has them.
     """
-    scored = split_frames(table, fs, split)
+    scored = frame_arrays(split_frames(table, fs, split, labels))
     curve = sweep(scored)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   sigma=sigma, objective=objective, objective_value=value, split=split,
                   frameset_fingerprint=table.meta.get("frameset_fingerprint"),
-                  n_frames=len(scored), n_candidates=len(curve),
+                  n_frames=len(scored.score), n_candidates=len(curve),
                   metrics_at_sigma=detection_metrics(scored, sigma),
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
     if objective == "tm-at-match":

@@ -4,12 +4,12 @@
 (``cluster``); both call ``episode.score_episode`` and write the same chunk files, so
 either resumes the other. ``schema`` holds what a table and its chunks contain, the metadata
 encoding and when a chunk counts (a damaged one is scored again); ``cache`` the folder rule,
-finding and merging tables; ``table`` the ``ScoreTable`` every later step reads.
+finding and merging tables; ``table`` the ``ScoreTable`` every later step reads; ``options``
+the ``RunOptions`` (batch size, workers, progress bars) that callers pass down as one object.
 """
 
 from pin_match.scoring.api import score, score_to_file
 from pin_match.scoring.cache import (
-    DEFAULT_OUT,
     Shard,
     ShardError,
     cache_dir,
@@ -21,8 +21,10 @@ from pin_match.scoring.cache import (
     table_name,
 )
 from pin_match.scoring.episode import PreparedMatcher, score_episode
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable, ScoreTableError
 
-__all__ = ["DEFAULT_OUT", "PreparedMatcher", "ScoreTable", "ScoreTableError", "Shard", "ShardError", "cache_dir",
+__all__ = ["DEFAULT_RUN", "PreparedMatcher", "RunOptions", "ScoreTable", "ScoreTableError", "Shard", "ShardError",
+           "cache_dir",
            "canonical_order", "find_score_table", "merge", "read_meta", "score", "score_episode", "score_to_file",
            "table_meta", "table_name"]

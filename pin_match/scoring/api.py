@@ -17,12 +17,13 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from pin_match import atomic
+from pin_match import atomic, outputs
 from pin_match.contract.matcher import Matcher
-from pin_match.contract.registry import create_matcher, with_weights
+from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.cache import DEFAULT_OUT, Shard, assemble, cache_dir, read_meta, table_meta, table_name
+from pin_match.scoring.cache import Shard, assemble, cache_dir, read_meta, table_meta, table_name
 from pin_match.scoring.local import score_here
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.schema import chunk_path
 from pin_match.scoring.table import ScoreTable
 
@@ -36,17 +37,17 @@ def score(frameset: FrameSet | str | Path, matcher: Matcher | str, **kwargs) -> 
 
 
 def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
-                  weights: str | None = None, split: str | None = None, out: str | Path = DEFAULT_OUT,
-                  batch_size: int = 8, shard: Shard | str | None = None, workers: int | None = None,
-                  progress: bool = True, client=None) -> Path:
+                  split: str | None = None, out: str | Path = outputs.SCORES, shard: Shard | str | None = None,
+                  run: RunOptions = DEFAULT_RUN, client=None) -> Path:
     """Score (or find in the cache) and return the table's path; memory stays flat in the number of frames.
 
-    With a ``distributed.Client`` the episodes are scored on its cluster (``workers`` is then unused),
-    into the same cache and the same table bytes.
+    ``overrides`` configure a matcher given by name (weights included: ``registry.with_weights``).
+    With a ``distributed.Client`` the episodes are scored on its cluster (``run.workers`` is then
+    unused), into the same cache and the same table bytes.
     """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(matcher, str):
-        matcher = create_matcher(matcher, **with_weights(overrides, weights))
+        matcher = create_matcher(matcher, **(overrides or {}))
     if isinstance(shard, str):
         shard = Shard.parse(shard)
     part = fs.split(split)
@@ -59,13 +60,14 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
     if final.exists() and read_meta(final) == meta:
         return final
     chunks = atomic.ensure_dir(root / "chunks")
-    with _progress(part, episode_ids, progress, matcher) as bar:
+    with _progress(part, episode_ids, run.progress, matcher) as bar:
         if client is not None:
             from pin_match.scoring.cluster import score_episodes
 
-            score_episodes(client, part, matcher, episode_ids, chunks, batch_size, bar)
+            score_episodes(client, part, matcher, episode_ids, chunks, run.batch_size, bar)
         else:
-            score_here(part, matcher, episode_ids, chunks, batch_size, workers or min(2, os.cpu_count() or 1), bar)
+            score_here(part, matcher, episode_ids, chunks, run.batch_size,
+                       run.workers or min(2, os.cpu_count() or 1), bar)
     assemble(final, [chunk_path(chunks, e) for e in sorted(episode_ids)], meta)
     return final
 

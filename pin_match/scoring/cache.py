@@ -14,15 +14,13 @@ from pathlib import Path
 import pandas as pd
 
 import pin_match
-from pin_match import atomic, outputs
+from pin_match import atomic
 from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.scoring.schema import COLUMNS, arrow_schema, as_stored, decode_meta
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
-
-DEFAULT_OUT = outputs.SCORES
 
 
 class ShardError(PinMatchError, ValueError):

@@ -2,7 +2,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from typing import Any
 
 from pin_match.errors import PinMatchError
 
@@ -18,21 +19,27 @@ def default_backbone() -> str:
     return "effnet" if "effnet" in available_names() else "dino"
 
 
+def _flag(default: Any, help_: str) -> Any:
+    """A field whose help is the ``pin-match train`` flag's: the CLI generates one flag per field."""
+    return field(default=default, metadata={"help": help_})
+
+
 @dataclass
 class TrainConfig:
     """Hyper-parameters; every field enters the run's identity (a resumed run must match them all)."""
 
-    hidden: int = 256            # width of the head's hidden layer
-    epochs: int = 20             # upper bound; early stopping usually ends sooner
-    patience: int = 5            # epochs without a better validation AUROC before stopping
-    batch_crops: int = 32        # crops per step, all from one episode (its queries share prototypes)
-    lr: float = 1e-3
-    weight_decay: float = 1e-4
-    holdout: float = 0.25        # share of each category's train objects held out for validation and sigma
-    min_cover: float = 0.5       # a patch is "on" an object when it covers at least this share of it
-    seed: int = 0
-    threads: int = 2             # torch CPU threads; fixed so results do not depend on the machine's count
-    objective: str = "first-match"  # how sigma is chosen on the held-out objects (see pin_match.evaluation.tuning)
+    hidden: int = _flag(256, "hidden width of the head")
+    epochs: int = _flag(20, "at most this many epochs (early stopping usually ends sooner)")
+    patience: int = _flag(5, "stop after this many epochs without a better held-out AUROC")
+    batch_crops: int = _flag(32, "crops per step, all from one episode (its queries share prototypes)")
+    lr: float = _flag(1e-3, "AdamW learning rate")
+    weight_decay: float = _flag(1e-4, "AdamW weight decay")
+    holdout: float = _flag(0.25, "share of each category's train objects held out for early stopping and sigma")
+    min_cover: float = _flag(0.5, "a patch is a positive when its object covers at least this share of it")
+    seed: int = _flag(0, "seed of the head and the batch order")
+    threads: int = _flag(2, "torch CPU threads, fixed so results do not depend on the machine's core count")
+    objective: str = _flag("first-match", "how sigma is chosen on the held-out objects "
+                                          "(pin_match.evaluation.tuning)")
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:

@@ -19,13 +19,12 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from pin_match import atomic
+from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
-from pin_match.scoring import score
-from pin_match.scoring.cache import DEFAULT_OUT
+from pin_match.scoring import RunOptions, score
 from pin_match.training.config import TrainingError
 
 Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform
@@ -79,7 +78,7 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
         if transform not in TRANSFORMS:
             raise TrainingError(f"fusion component {name}: transform {transform!r}; choose one of {sorted(TRANSFORMS)}")
         matcher = create_matcher(name, **overrides)
-        table = score(fs, matcher, split=split, out=out, progress=progress)
+        table = score(fs, matcher, split=split, out=out, run=RunOptions(progress=progress))
         scored = scored_frames(labels, table)
         labels[f"s{i}"] = labels.frame_id.map(dict(zip(scored.frame_id, scored.score)))
         records.append(dict(matcher=name, config=resolved_config(matcher), id=matcher.id, transform=transform))
@@ -90,7 +89,7 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
 
 
 def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], path: str | Path, *,
-               split: str = "train", out: str | Path = DEFAULT_OUT, l2: float = 1.0, points_from: int = 0,
+               split: str = "train", out: str | Path = outputs.SCORES, l2: float = 1.0, points_from: int = 0,
                progress: bool = False) -> dict[str, Any]:
     """Fit the weights on ``split`` of ``frameset`` and write the fusion file to ``path`` (atomically).
 
