@@ -37,7 +37,6 @@ from pin_match.matchers.patch import alpha_to_grid, patch_matcher
 from pin_match.scoring.cache import cache_dir
 
 STORE_VERSION = 1
-DEFAULT_OUT = outputs.FEATURES
 META = "store.json"
 CROPS = "crops.parquet"
 FRAME_TOKENS = "frames.npy"        # (n_crops, grid * grid, dim) float16
@@ -136,7 +135,7 @@ def _crop_labels(mask: np.ndarray, legend: dict[int, int], grid: int) -> tuple[n
 
 
 def build_features(frameset: FrameSet | str | Path, backbone: str, *, overrides: dict[str, Any] | None = None,
-                   out: str | Path = DEFAULT_OUT, split: str | None = None, batch_size: int = 8,
+                   out: str | Path = outputs.FEATURES, split: str | None = None, batch_size: int = 8,
                    progress: bool = True) -> FeatureStore:
     """Encode every frame crop and reference view once (or find the finished store) and open it.
 

@@ -34,7 +34,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from pin_match import atomic
+from pin_match import atomic, outputs
 from pin_match.data.frameset import FrameSet
 from pin_match.matchers.patch import patch_matcher
 from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
@@ -43,7 +43,7 @@ from pin_match.training.checkpoint import load_state, params, save_state, write_
 from pin_match.training.compare import choose_sigma_on, query_frames, validation_auroc
 from pin_match.training.config import TrainConfig, TrainingError, default_backbone
 from pin_match.training.data import TrainData, check_trainable, epoch_batches, prepare_data
-from pin_match.training.features import DEFAULT_OUT, FeatureStore, build_features
+from pin_match.training.features import FeatureStore, build_features
 from pin_match.training.loss import batch_loss
 
 
@@ -71,7 +71,7 @@ def find_store(fs: FrameSet, backbone: str, overrides: dict, features: str | Pat
 
 
 def train(frameset: FrameSet | str | Path, out: str | Path, *, backbone: str | None = None,
-          overrides: dict[str, Any] | None = None, features: str | Path = DEFAULT_OUT,
+          overrides: dict[str, Any] | None = None, features: str | Path = outputs.FEATURES,
           cfg: TrainConfig | None = None, store: FeatureStore | None = None, progress: bool = True,
           stop_after: int | None = None) -> dict:
     """Train (or resume, or find finished) a head in ``out``; returns its config.json content.
