@@ -57,8 +57,9 @@ def split_frames(table: ScoreTable, fs: FrameSet, split: str | None,
 
 def evaluate(table: ScoreTable, fs: FrameSet, sigma: SigmaChoice, split: str | None = "val", *,
              labels: pd.DataFrame | None = None, n_boot: int = 1000,
-             seed: int = 0) -> tuple[dict, pd.DataFrame, FrameArrays]:
-    """Metrics (with CIs and localisation), the per-category table and the arrays of one split's scored frames."""
+             seed: int = 0) -> tuple[dict, pd.DataFrame, pd.DataFrame, FrameArrays]:
+    """Metrics (with CIs and localisation), the per-category table, and one split's scored frames as a table
+    (the report page's galleries need its ids and visibility) and as the arrays the metrics and plots use."""
     scored = split_frames(table, fs, split, labels)
     arr = frame_arrays(scored)
     metrics = detection_metrics(arr, sigma.value)
@@ -69,7 +70,7 @@ def evaluate(table: ScoreTable, fs: FrameSet, sigma: SigmaChoice, split: str | N
                   **sigma.as_dict(), metrics=metrics,
                   ci95=bootstrap_ci(arr, sigma.value, n_boot=n_boot, seed=seed), n_bootstrap=n_boot,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
-    return result, per_category(arr, sigma.value), arr
+    return result, per_category(arr, sigma.value), scored, arr
 
 
 def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:

@@ -38,7 +38,7 @@ def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float
     """
     choice = sigma if isinstance(sigma, SigmaChoice) else \
         resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
-    result, categories, scored = evaluate(table, fs, choice, split, labels=labels, n_boot=n_boot, seed=seed)
+    result, categories, frames, scored = evaluate(table, fs, choice, split, labels=labels, n_boot=n_boot, seed=seed)
     out = Path(out_dir)
     files = [out / name for name in FILES]
     atomic.write_json(files[0], result)
@@ -53,5 +53,5 @@ def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float
     plot_sigma_curves(sweep(scored), choice.value, files[4], title)
     plot_score_distributions(scored, choice.value, files[5], title)
     plot_per_category(categories, files[6], title)
-    write_report_page(files[7], table, fs, scored, result, overall, per_cat)
+    write_report_page(files[7], table, fs, frames, result, overall, per_cat)
     return {**result, "files": [str(f) for f in files]}
