@@ -173,10 +173,29 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     assert loads == [tmp_path / "demo" / "frameset"]
     out = capsys.readouterr().out
     breakdown = out[out.index("where the time went"):].splitlines()[1:]
-    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "total"]
+    breakdown = breakdown[:breakdown.index("")]
+    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "compare", "total"]
     assert "score color" in breakdown[1] and "score sift" in breakdown[2]
     seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
     assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s
+
+
+def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frameset, tmp_path, capsys):
+    """The last line printed is the path of one index.html: both tables, each report, each compare page."""
+    import shutil
+
+    shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
+    assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
+                 "--lookalike-matcher", "color", "--lookalike-matcher", "sift", "--workers", "1", "--quiet"]) == 0
+    index = Path(capsys.readouterr().out.strip().splitlines()[-1].split(": ")[-1])
+    assert index == tmp_path / "demo" / "index.html"
+    text = index.read_text(encoding="utf-8")
+    assert re.findall(r'<a href="([^"]+)"', text) == [
+        "lookalikes/reports/color/report.html", "lookalikes/reports/sift/report.html",
+        "reports/color/report.html", "reports/sift/report.html",
+        "compare/sift_vs_color/compare.html", "lookalikes/compare/sift_vs_color/compare.html"]
+    assert all((index.parent / href).is_file() for href in re.findall(r'<a href="([^"]+)"', text))
+    assert text.count("<table>") == 2 and "synthetic" in text and "look-alikes" in text
 
 
 def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
@@ -253,3 +272,22 @@ def test_the_default_score_folder_has_one_name():
     defaults = [commands["score"].get_default("out"), commands["tune"].get_default("cache"),
                 commands["report"].get_default("cache"), inspect.signature(score_to_file).parameters["out"].default]
     assert defaults == [outputs.SCORES] * 4
+
+
+def test_compare_finds_each_matcher_by_its_config(tiny_frameset, tmp_path, capsys):
+    """--cfg MATCHER:KEY=VALUE picks that matcher's configured table from the cache; a stray name is one line."""
+    from pin_match.contract.registry import create_matcher
+
+    cache = tmp_path / "scores"
+    for args in (["--matcher", "color", "--cfg", "stride=8"], ["--matcher", "sift"]):
+        assert _run(capsys, "score", tiny_frameset.root, *args, "--out", cache, "--workers", "1", "--quiet")[0] == 0
+    common = ["compare", "--frameset", tiny_frameset.root, "--matcher", "color", "--matcher", "sift",
+              "--cache", cache, "--split", "all", "--bootstrap", "20", "--out", tmp_path / "cmp"]
+    rc, out, err = _run(capsys, *common)
+    assert rc == 2 and "this configuration" in err
+    rc, out, err = _run(capsys, *common, "--cfg", "color:stride=8")
+    configured = create_matcher("color", stride=8).id
+    assert rc == 0 and configured != create_matcher("color").id
+    assert configured in (tmp_path / "cmp" / "compare.md").read_text(encoding="utf-8")
+    rc, out, err = _run(capsys, *common, "--cfg", "colour:stride=8")
+    assert rc == 2 and err.count("\n") == 1 and "--cfg for colour, which is not among the compared matchers" in err

@@ -138,9 +138,12 @@ def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS,
     CORe50 instances pasted into real rooms, ``pin-match lookalikes --variant pasted``) is
     built from the photos shipped with pin_match. Each frame-set is loaded once and passed
     down; ``watch`` collects the seconds of every step. No ``lookalike_matchers``: synthetic only.
+    Where a set has two or more matchers, each is compared with the first (``compare_bench``),
+    so the folder's ``index.html`` links those pages beside the reports.
     """
     from pin_match.data.lookalikes import build as build_lookalikes
     from pin_match.data.synth import generate
+    from pin_match.evaluation.compare import compare_bench
 
     for name in [*matchers, *lookalike_matchers]:  # an unknown name fails before anything is rendered
         get_matcher_class(name)
@@ -149,11 +152,15 @@ def demo(out: str | Path = DEMO_OUT, matchers: Sequence[str] = OFFLINE_MATCHERS,
     fs = _load_or_make(out / "frameset", watch, "render frame-set", lambda path: generate(
         path, seed=seed, episodes=DEMO_EPISODES, workers=run.workers, progress=run.progress))
     tables = {"synthetic": bench(fs, matchers, out, run=run, watch=watch)[0]}
+    with watch.step("compare"):
+        compare_bench(out, fs)
     if lookalike_matchers:
         real = _load_or_make(out / "lookalikes" / "frameset", watch, "build look-alike set",
                              lambda path: build_lookalikes(path, variant="pasted"))
         tables["look-alikes"] = bench(real, lookalike_matchers, out / "lookalikes", sigma_from="default",
                                       run=run, watch=watch, label=" (look-alikes)")[0]
+        with watch.step("compare (look-alikes)"):
+            compare_bench(out / "lookalikes", real)
     return tables, out
 
 
