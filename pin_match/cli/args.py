@@ -31,7 +31,7 @@ def matcher_overrides(a: argparse.Namespace) -> dict:
 def add_bench_config(s: argparse.ArgumentParser) -> None:
     """--cfg MATCHER:KEY=VALUE (repeatable): several matchers run side by side, so each pair names its matcher."""
     s.add_argument("--cfg", action="append", metavar="MATCHER:KEY=VALUE",
-                   help="config override of one benched matcher, e.g. effnet:img_size=224 or "
+                   help="config override of one of the --matcher matchers, e.g. effnet:img_size=224 or "
                         "effnet:weights=PATH (repeatable)")
 
 

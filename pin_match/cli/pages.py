@@ -6,6 +6,7 @@ import argparse
 from pathlib import Path
 
 from pin_match import outputs
+from pin_match.cli.args import add_bench_config, bench_overrides
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 
@@ -31,8 +32,13 @@ def _cmd_compare(a: argparse.Namespace) -> None:
 
     if len(a.matcher) != 2 or len(a.threshold or [None, None]) != 2:
         raise CompareUsageError("name two matchers (--matcher A --matcher B) and, if any, two --threshold values")
+    overrides = bench_overrides(a.cfg)
+    stray = sorted(set(overrides) - set(a.matcher))
+    if stray:
+        raise CompareUsageError(f"--cfg for {', '.join(stray)}, which is not among the compared matchers "
+                                f"({', '.join(a.matcher)}): fix the name before ':'")
     fs = FrameSet.load(a.frameset)
-    tables = [ScoreTable.read(find_score_table(a.cache, fs, name)) for name in a.matcher]
+    tables = [ScoreTable.read(find_score_table(a.cache, fs, name, overrides.get(name))) for name in a.matcher]
     sigmas = [resolve_sigma(t.matcher_id, t.meta.get("default_sigma"), s, a.thresholds)
               for t, s in zip(tables, a.threshold or [None, None])]
     out = a.out or outputs.RUNS / "compare" / f"{a.matcher[0]}_vs_{a.matcher[1]}" / str(a.split)
@@ -57,6 +63,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                                    "'Paired comparison'); writes compare.csv, compare.md and compare.html.")
     s.add_argument("--frameset", type=Path, required=True, help="the frame-set both were scored on")
     s.add_argument("--matcher", action="append", required=True, help="matcher A, then matcher B (twice)")
+    add_bench_config(s)
     g = s.add_mutually_exclusive_group()
     g.add_argument("--threshold", type=float, action="append", metavar="SIGMA",
                    help="sigma of A, then of B (twice); default: each matcher's default sigma")
