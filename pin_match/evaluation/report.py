@@ -41,7 +41,6 @@ def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float
     result, categories, frames, scored = evaluate(table, fs, choice, split, labels=labels, n_boot=n_boot, seed=seed)
     out = Path(out_dir)
     files = [out / name for name in FILES]
-    atomic.write_json(files[0], result)
     atomic.write_text(files[1], categories.to_csv(index_label="category"))
     overall = side_by_side([report_row(result)])
     per_cat = category_table(categories)
@@ -54,4 +53,6 @@ def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float
     plot_score_distributions(scored, choice.value, files[5], title)
     plot_per_category(categories, files[6], title)
     write_report_page(files[7], table, fs, frames, result, overall, per_cat)
+    # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)
+    atomic.write_json(files[0], result)
     return {**result, "files": [str(f) for f in files]}
