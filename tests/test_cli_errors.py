@@ -40,6 +40,10 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["bench", fs, "--matcher", "color", "--cfg", "sift:ratio=0.7", "--out", f"{tmp}/b"],
         ["bench", fs, "--matcher", "color", "--cfg", "color:no_such_key=1", "--out", f"{tmp}/b"],
         ["demo", "--matcher", "no-such-matcher", "--out", f"{tmp}/demo"],
+        ["inspect", missing],
+        ["compare", "--frameset", fs, "--matcher", "color"],  # one matcher: nothing to compare
+        ["compare", "--frameset", fs, "--matcher", "color", "--matcher", "sift", "--cache", missing],
+        ["compare", "--frameset", fs, "--matcher", "color", "--matcher", "sift", "--cfg", "effnet:img_size=224"],
         ["features", fs, "--backbone", "color"],
         ["features", missing, "--backbone", "effnet"],
         ["train", fs, "--out", f"{tmp}/head", "--holdout", "2"],
