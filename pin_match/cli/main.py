@@ -151,7 +151,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("lookalikes", help="build the real look-alike frame-set: real photos of several instances "
                                           "per category (docs/lookalike-set.md; offline)",
-                       description="Real photos of 43 CORe50 object instances in 10 categories (CC BY 4.0), one "
+                       description="Real photos of 32 CORe50 object instances in 10 categories (CC BY 4.0), one "
                                    "episode per target instance with its same-category look-alikes, other "
                                    "categories and empty rooms. 'shot': the photos as frames; 'pasted': each object "
                                    "cut out and pasted into real office photos (TUM RGB-D). The larger grocery set: "
