@@ -136,10 +136,14 @@ def box_mask(rgb: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
     """The object inside ``box`` (uint8, 255 = object): GrabCut from the box, its largest piece, holes filled.
 
     Outside the box is sure background; the box holds the object and what lies behind it.
-    Deterministic (OpenCV's RNG seeded). All zero when GrabCut keeps nothing.
+    A box over the whole photo leaves GrabCut no background to learn from: the object fills
+    the photo, and so does its mask (which the mask check then rejects). Deterministic
+    (OpenCV's RNG seeded). All zero when GrabCut keeps nothing.
     """
     h, w = rgb.shape[:2]
     x0, y0, x1, y1 = box
+    if x0 <= 0 and y0 <= 0 and x1 >= w and y1 >= h:
+        return np.full((h, w), 255, np.uint8)
     seed = np.zeros((h, w), np.uint8)
     cv2.setRNGSeed(0)
     cv2.grabCut(np.ascontiguousarray(rgb[..., ::-1]), seed, (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1)),
@@ -174,7 +178,7 @@ def prepare_myvlm(myvlm_repo: str | Path, out: str | Path, *, boxes: str | Path 
         raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
     commit = _commit(repo)
     source = f"{MYVLM_SOURCE}@{commit}" if commit else MYVLM_SOURCE
-    split = product_splits([p for p in photos if p.box])
+    split = product_splits(list({p.concept: p for p in photos if p.box}.values()))  # one entry per concept
     atomic.ensure_dir(out.parent)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:
