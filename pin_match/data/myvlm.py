@@ -74,7 +74,8 @@ CONCEPT_CATEGORIES = {
     "red_piggy_bank": "figurine",
 }
 PAD = 0.25  # of the box's width (height) added left and right (above and below) before cropping
-MAX_SIDE = 800
+MAX_SIDE = 640  # the frame's height: a larger crop is never shown at full size
+GRABCUT_SIDE = 320
 GRABCUT_ITERATIONS = 5
 OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
 
@@ -136,19 +137,24 @@ def box_mask(rgb: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
     """The object inside ``box`` (uint8, 255 = object): GrabCut from the box, its largest piece, holes filled.
 
     Outside the box is sure background; the box holds the object and what lies behind it.
-    A box over the whole photo leaves GrabCut no background to learn from: the object fills
-    the photo, and so does its mask (which the mask check then rejects). Deterministic
-    (OpenCV's RNG seeded). All zero when GrabCut keeps nothing.
+    GrabCut runs on a copy shrunk to ``GRABCUT_SIDE`` (its cost grows with the pixels; on two
+    shared cores a full-size crop takes seconds) and its mask is scaled back up. A box over the
+    whole photo leaves GrabCut no background to learn from: the object fills the photo, and so
+    does its mask (which the mask check then rejects). Deterministic (OpenCV's RNG seeded). All
+    zero when GrabCut keeps nothing.
     """
     h, w = rgb.shape[:2]
-    x0, y0, x1, y1 = box
-    if x0 <= 0 and y0 <= 0 and x1 >= w and y1 >= h:
+    if box[0] <= 0 and box[1] <= 0 and box[2] >= w and box[3] >= h:
         return np.full((h, w), 255, np.uint8)
-    seed = np.zeros((h, w), np.uint8)
+    s = min(1.0, GRABCUT_SIDE / max(h, w))
+    small = cv2.resize(rgb, (max(round(w * s), 1), max(round(h * s), 1)), interpolation=cv2.INTER_AREA)
+    x0, y0, x1, y1 = (int(round(v * s)) for v in box)
+    seed = np.zeros(small.shape[:2], np.uint8)
     cv2.setRNGSeed(0)
-    cv2.grabCut(np.ascontiguousarray(rgb[..., ::-1]), seed, (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1)),
+    cv2.grabCut(np.ascontiguousarray(small[..., ::-1]), seed, (x0, y0, max(x1 - x0, 1), max(y1 - y0, 1)),
                 np.zeros((1, 65)), np.zeros((1, 65)), GRABCUT_ITERATIONS, cv2.GC_INIT_WITH_RECT)
-    fg = np.isin(seed, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
+    fg = np.where(np.isin(seed, (cv2.GC_FGD, cv2.GC_PR_FGD)), 255, 0).astype(np.uint8)
+    fg = (cv2.resize(fg, (w, h), interpolation=cv2.INTER_LINEAR) > 127).astype(np.uint8)
     fg = largest_piece(cv2.morphologyEx(fg, cv2.MORPH_OPEN, np.ones((5, 5), np.uint8)))
     if not fg.any():
         return fg
