@@ -91,7 +91,9 @@ def test_boxed_photos_are_cropped_masked_and_licensed(prepared):
         assert r["licence"] == (YOLLAVA_LICENCE if concept in ("bo", "mam") else MYVLM_LICENCE)
         assert r["source"] == MYVLM_SOURCE
         assert (repo / r["source_path"]).is_file() and r["use"] == ""
-        photo = cv2.imread(str(src / r["file"]))
+        photo = cv2.imread(str(src / r["file"]))[..., ::-1]
+        k = CONCEPTS.index(concept)
+        assert np.abs(photo[150, 105].astype(int) - (40 + 40 * k, 200 - 30 * k, 60 + 20 * k)).max() < 12  # RGB kept
         mask = cv2.imread(str(src / r["mask"]), cv2.IMREAD_GRAYSCALE) > 127
         # cropped to the box (140 x 200) grown by a quarter per side, clipped to the photo: 210 x 300
         assert photo.shape[:2] == mask.shape == (300, 210)

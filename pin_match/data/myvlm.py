@@ -228,7 +228,7 @@ def _photo_row(repo: Path, stage: Path, p: BoxedPhoto, source: str, split: dict[
     if problems:
         return None, "mask check: " + "; ".join(problems)
     file, mask_file = f"photos/{p.photo_id}.jpg", f"masks/{p.photo_id}.png"
-    atomic.write_image(stage / file, crop[..., ::-1], [cv2.IMWRITE_JPEG_QUALITY, 95])
+    atomic.write_image(stage / file, crop, [cv2.IMWRITE_JPEG_QUALITY, 95])
     atomic.write_image(stage / mask_file, kept)
     return dict(photo_id=p.photo_id, instance_id=p.instance_id, category=p.category, file=file, mask=mask_file,
                 source=source, source_path=source_path,
