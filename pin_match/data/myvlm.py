@@ -3,8 +3,9 @@
 MyVLM (Alaluf et al., ECCV 2024; github woonsango/MyVLM) ships ``dataset/data_concept_embedding/
 <concept>/``: 7-17 in-the-wild photos of each of 31 personal objects and pets, 452 to 4000 px, the
 object anywhere in the scene. Several concepts share a kind, so they are each other's real
-look-alikes: three dogs, two cats, three sheep soft toys, two cups and eight toy figures
-(``CONCEPT_CATEGORIES``). The figurines and the single objects are not used yet.
+look-alikes: three dogs, two cats, two cups, three sheep soft toys, ten toy figures and eight
+figurines (``CONCEPT_CATEGORIES``). The three concepts with no other of their kind (a bean-bag
+chicken, a teapot, running shoes) are left out.
 
 ``prepare_myvlm`` turns a checkout into the source folder ``pin_match.data.lookalikes.build``
 reads (docs/lookalike-set.md):
@@ -17,7 +18,8 @@ reads (docs/lookalike-set.md):
   small cup in a kitchen, stays out of the frame) and shrunk to at most ``MAX_SIDE`` px: the
   frames are 640x360, so more pixels would only slow the build;
 - its mask is GrabCut started from the box (``box_mask``); a photo whose mask fails
-  ``pin_match.data.mask_check`` is left out, and NOTICE.md lists it with why;
+  ``pin_match.data.mask_check`` is left out, and NOTICE.md lists it with why. The hand rule is
+  not applied: no kept photo shows a hand, and the skin box takes tan dogs and pink toys;
 - splits by instance with the grocery rule (``pin_match.data.grocery.product_splits``): the toy
   figures are halved, the smaller categories go whole to one split so each keeps its look-alikes;
 - empty rooms: the TUM office photos shipped with pin_match.
