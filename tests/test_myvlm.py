@@ -15,6 +15,7 @@ import pytest
 from pin_match.cli.main import main
 from pin_match.data.lookalike_source import LookalikeError, load_photos
 from pin_match.data.lookalikes import build
+from pin_match.data.mask_check import mask_problems
 from pin_match.data.myvlm import (
     BOXES_CSV,
     CONCEPT_CATEGORIES,
@@ -176,3 +177,12 @@ def test_the_shipped_boxes_cover_every_concept_with_look_alikes():
     assert min(len(cs) for cs in per_category.values()) >= 2  # every concept has a real look-alike
     assert all(p.dropped for p in photos if not p.box)  # every photo left out by eye says why
     assert len({(p.concept, p.file) for p in photos}) == len(photos)
+
+
+def test_the_hand_rule_is_left_out_for_objects_not_held():
+    img = np.full((100, 100, 3), 60, np.uint8)
+    img[30:70, 30:70] = (200, 140, 110)  # a tan dog's colour, inside the skin box
+    mask = np.zeros((100, 100), np.uint8)
+    mask[30:70, 30:70] = 1
+    assert any("skin-coloured" in p for p in mask_problems(img, mask))
+    assert mask_problems(img, mask, hand=False) == []
