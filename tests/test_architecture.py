@@ -202,5 +202,5 @@ def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path)
         assert init.relative_to(ROOT).as_posix() in names, f"add {package} to pyproject's packages"
     assert "pin_match/matchers/TEMPLATE.py" in names and not any(n.startswith("matchers/") for n in names)
     assert {"pin_match/data/lookalike_src/photos.csv", "pin_match/data/lookalike_src/NOTICE.md",
-            "pin_match/matchers/fusion_lookalike.json"} <= names  # the real look-alike set builds from any install
+            "pin_match/matchers/fusion_lookalike.json", "pin_match/data/myvlm_boxes.csv"} <= names  # real sets build
     assert sum(n.startswith("pin_match/data/lookalike_src/photos/") for n in names) == 59

@@ -19,9 +19,8 @@ from pin_match.data.grocery import (
     Product,
     plain_background_mask,
     prepare_grocery,
-    product_splits,
 )
-from pin_match.data.lookalike_source import LookalikeError, load_photos
+from pin_match.data.lookalike_source import LookalikeError, category_splits, load_photos
 from pin_match.data.lookalikes import build, plan_episodes
 
 HEADER = ["Class Name (str)", "Class ID (int)", "Coarse Class Name (str)", "Coarse Class ID (int)",
@@ -132,7 +131,7 @@ def test_split_by_product_keeps_small_categories_whole(prepared):
 
 def test_small_categories_alternate_between_splits():
     products = [Product(f"{c}-{k}", c, None, ()) for c in ("Soy-Milk", "Soyghurt", "Sour-Cream") for k in range(2)]
-    split = product_splits(products)
+    split = category_splits(products)
     per_category = {c: {split[p.instance_id] for p in products if p.coarse == c} for c in ("Soy-Milk", "Soyghurt",
                                                                                           "Sour-Cream")}
     assert all(len(s) == 1 for s in per_category.values())  # never split

@@ -55,7 +55,8 @@ def _cmd_lookalikes(a: argparse.Namespace) -> None:
     from pin_match.data.lookalike_source import LookalikeError
     from pin_match.data.lookalikes import build, prepare_core50
 
-    prepare = "--prepare-from" if a.prepare_from else "--prepare-grocery" if a.prepare_grocery else None
+    prepare = ("--prepare-from" if a.prepare_from else "--prepare-grocery" if a.prepare_grocery else
+               "--prepare-myvlm" if a.prepare_myvlm else None)
     if (a.src if prepare else a.out) is None:
         raise LookalikeError(f"{prepare} writes the source folder --src: name it" if prepare else
                              "name the frame-set folder to create: pin-match lookalikes OUT")
@@ -66,6 +67,11 @@ def _cmd_lookalikes(a: argparse.Namespace) -> None:
         from pin_match.data.grocery import prepare_grocery
 
         print(f"wrote {prepare_grocery(a.prepare_grocery, a.src, overwrite=a.overwrite)}")
+        return
+    if a.prepare_myvlm:
+        from pin_match.data.myvlm import prepare_myvlm
+
+        print(f"wrote {prepare_myvlm(a.prepare_myvlm, a.src, overwrite=a.overwrite)}")
         return
     print(f"wrote {build(a.out, a.src, variant=a.variant, seed=a.seed, overwrite=a.overwrite)}")
 
@@ -155,7 +161,8 @@ def build_parser() -> argparse.ArgumentParser:
                                    "episode per target instance with its same-category look-alikes, other "
                                    "categories and empty rooms. 'shot': the photos as frames; 'pasted': each object "
                                    "cut out and pasted into real office photos (TUM RGB-D). The larger grocery set: "
-                                   "--prepare-grocery GROCERY_REPO --src SRC, then OUT --src SRC (shot only).")
+                                   "--prepare-grocery GROCERY_REPO --src SRC, then OUT --src SRC (shot only). "
+                                   "The MyVLM set: --prepare-myvlm MYVLM_REPO --src SRC, then OUT --src SRC.")
     s.add_argument("out", type=Path, nargs="?", help="frame-set folder to create")
     s.add_argument("--variant", choices=("shot", "pasted"), default="shot", help="photos as shot (default) or "
                                                                                   "objects pasted into rooms")
@@ -168,6 +175,9 @@ def build_parser() -> argparse.ArgumentParser:
     prepare.add_argument("--prepare-grocery", type=Path, metavar="GROCERY_REPO",
                          help="instead of building: write --src from a checkout of marcusklasson/GroceryStoreDataset "
                               "(31 packaged products: iconic image as reference, 6 store photos each; MIT)")
+    prepare.add_argument("--prepare-myvlm", type=Path, metavar="MYVLM_REPO",
+                         help="instead of building: write --src from a checkout of woonsango/MyVLM (real pets, "
+                              "toys and figurines, several per category; non-commercial licence; never shipped)")
     s.add_argument("--seed", type=int, default=0, help="seed of frame choices and placements (default 0)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set (or --src) at OUT")
     s.set_defaults(func=_cmd_lookalikes)

@@ -31,7 +31,6 @@ from __future__ import annotations
 import csv
 import os
 import shutil
-import subprocess
 import tempfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,7 +39,7 @@ import cv2
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.compose import largest_piece, stable_seed
+from pin_match.data.compose import largest_piece
 from pin_match.data.lookalike_source import (
     OPTIONAL_PHOTO_COLUMNS,
     PACKAGED_SRC,
@@ -48,8 +47,8 @@ from pin_match.data.lookalike_source import (
     REFERENCE_USE,
     ROOM_COLUMNS,
     LookalikeError,
-    Photo,
-    instance_splits,
+    category_splits,
+    checkout_commit,
     object_mask,
     read_csv,
     read_rgb,
@@ -61,7 +60,6 @@ GROCERY_LICENCE = "MIT (Grocery Store Dataset, Klasson et al. 2019; Copyright (c
 PRODUCT_GROUP = "Packages"  # the coarse-class folder of packaged products (the others: Fruit, Vegetables)
 PHOTO_FOLDERS = ("train", "val", "test")  # the dataset's own photo splits, all used: the set splits by product
 PHOTOS_PER_PRODUCT = 6
-MIN_PRODUCTS_TO_HALVE = 4  # halving fewer would leave a product without a look-alike in its split
 BACKGROUND_TOLERANCE = 24  # iconic images: a pixel is product when a channel differs this much from the border
 CLASS_COLUMNS = ("Class Name (str)", "Coarse Class Name (str)", "Iconic Image Path (str)")
 OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
@@ -137,30 +135,6 @@ def spread(photos: tuple[Path, ...], n: int) -> list[Path]:
     return [photos[int(k)] for k in np.round(np.linspace(0, len(photos) - 1, n))]
 
 
-def product_splits(products: list[Product]) -> dict[str, str]:
-    """train / val per product (instance id); see the module docstring for the rule."""
-    by_category: dict[str, list[Product]] = {}
-    for p in products:
-        by_category.setdefault(p.category, []).append(p)
-    halved = [Photo(p.instance_id, p.instance_id, p.category, "", "") for ps in by_category.values()
-              if len(ps) >= MIN_PRODUCTS_TO_HALVE for p in ps]
-    out = instance_splits(halved) if halved else {}
-    small = sorted((c for c, ps in by_category.items() if len(ps) < MIN_PRODUCTS_TO_HALVE),
-                   key=lambda c: (-len(by_category[c]), stable_seed("split", c), c))
-    for k, c in enumerate(small):
-        out.update({p.instance_id: ("train", "val")[k % 2] for p in by_category[c]})
-    return out
-
-
-def _commit(repo: Path) -> str | None:
-    try:
-        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
-
-
 def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_product: int = PHOTOS_PER_PRODUCT,
                     overwrite: bool = False) -> Path:
     """Write a look-alike source folder from a checkout of marcusklasson/GroceryStoreDataset.
@@ -177,9 +151,9 @@ def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_pro
         raise LookalikeError(f"{licence} is missing: the MIT notice must travel with the photos")
     if out.exists() and not overwrite:
         raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
-    commit = _commit(repo)
+    commit = checkout_commit(repo)
     source = f"{GROCERY_SOURCE}@{commit}" if commit else GROCERY_SOURCE
-    split = product_splits(products)
+    split = category_splits(products)
     atomic.ensure_dir(out.parent)
     stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
     try:

@@ -19,6 +19,7 @@ from __future__ import annotations
 import csv
 import io
 import math
+import subprocess
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -38,6 +39,7 @@ PHOTO_COLUMNS = ("photo_id", "instance_id", "category", "file", "mask", "source"
 ROOM_COLUMNS = ("room_id", "file", "source", "source_path", "licence")
 OPTIONAL_PHOTO_COLUMNS = ("split", "use")
 REFERENCE_USE = "reference"
+MIN_INSTANCES_TO_HALVE = 4  # halving fewer would leave an instance without a look-alike in its split
 
 
 class LookalikeError(PinMatchError, ValueError):
@@ -157,3 +159,33 @@ def instance_splits(photos: Sequence[Photo]) -> dict[str, str]:
     return out
 
 
+
+
+def category_splits(instances: Sequence) -> dict[str, str]:
+    """train / val per instance (anything with ``instance_id`` and ``category``) of a downloaded source.
+
+    A category of ``MIN_INSTANCES_TO_HALVE`` or more instances is halved as ``instance_splits``
+    halves one; a smaller category goes whole to one split, so its instances keep their
+    look-alikes, the small categories alternating between train and val.
+    """
+    by_category: dict[str, list] = {}
+    for item in instances:
+        by_category.setdefault(item.category, []).append(item)
+    halved = [Photo(i.instance_id, i.instance_id, i.category, "", "") for items in by_category.values()
+              if len(items) >= MIN_INSTANCES_TO_HALVE for i in items]
+    out = instance_splits(halved) if halved else {}
+    small = sorted((c for c, items in by_category.items() if len(items) < MIN_INSTANCES_TO_HALVE),
+                   key=lambda c: (-len(by_category[c]), stable_seed("split", c), c))
+    for k, c in enumerate(small):
+        out.update({i.instance_id: ("train", "val")[k % 2] for i in by_category[c]})
+    return out
+
+
+def checkout_commit(repo: Path) -> str | None:
+    """The commit a downloaded repository is at, recorded as the source of its photos (None when not a git checkout)."""
+    try:
+        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None

@@ -39,8 +39,12 @@ def skin_pixels(rgb: np.ndarray) -> np.ndarray:
     return (cr >= SKIN_CR[0]) & (cr <= SKIN_CR[1]) & (cb >= SKIN_CB[0]) & (cb <= SKIN_CB[1])
 
 
-def mask_problems(rgb: np.ndarray, mask: np.ndarray) -> list[str]:
-    """What breaks the rules above (empty when the mask passes); ``mask`` is 0/1 or 0/255, the photo's size."""
+def mask_problems(rgb: np.ndarray, mask: np.ndarray, *, hand: bool = True) -> list[str]:
+    """What breaks the rules above (empty when the mask passes); ``mask`` is 0/1 or 0/255, the photo's size.
+
+    ``hand=False`` leaves out the hand rule, for sources whose objects are not held: there a
+    tan dog or a pink doll is what the skin box catches, not a hand.
+    """
     on = mask > 0
     h, w = on.shape
     problems = []
@@ -56,7 +60,7 @@ def mask_problems(rgb: np.ndarray, mask: np.ndarray) -> list[str]:
     pieces = int((stats[1:, cv2.CC_STAT_AREA] >= SPECK * h * w).sum())
     if pieces > 1:
         problems.append(f"{pieces} pieces larger than {SPECK:.1%} of the photo")
-    skin = float(skin_pixels(rgb)[on].mean()) if on.any() else 0.0
+    skin = float(skin_pixels(rgb)[on].mean()) if hand and on.any() else 0.0
     if skin > MAX_SKIN:
         problems.append(f"{skin:.0%} of the mask is skin-coloured (a hand; at most {MAX_SKIN:.0%})")
     return problems
