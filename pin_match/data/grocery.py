@@ -29,9 +29,6 @@ kinds, four peppers differing in colour alone), not single objects a user could 
 from __future__ import annotations
 
 import csv
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,16 +39,16 @@ from pin_match import atomic
 from pin_match.data.compose import largest_piece
 from pin_match.data.lookalike_source import (
     OPTIONAL_PHOTO_COLUMNS,
-    PACKAGED_SRC,
     PHOTO_COLUMNS,
     REFERENCE_USE,
-    ROOM_COLUMNS,
     LookalikeError,
     category_splits,
     checkout_commit,
+    copy_packaged_rooms,
     object_mask,
-    read_csv,
     read_rgb,
+    room_sources,
+    staged_source,
     write_csv,
 )
 
@@ -149,14 +146,10 @@ def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_pro
     licence = repo / "LICENSE"
     if not licence.is_file():
         raise LookalikeError(f"{licence} is missing: the MIT notice must travel with the photos")
-    if out.exists() and not overwrite:
-        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
     commit = checkout_commit(repo)
     source = f"{GROCERY_SOURCE}@{commit}" if commit else GROCERY_SOURCE
     split = category_splits(products)
-    atomic.ensure_dir(out.parent)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with staged_source(out, overwrite) as stage:
         rows = []
         for p in products:
             iconic_id = f"{p.instance_id}_iconic"
@@ -169,18 +162,9 @@ def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_pro
                 rows.append(_photo_row(repo, stage, p, photo_id, photo, object_mask(read_rgb(repo / photo)),
                                        source, split, ""))
         write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
-        for r in room_rows:
-            atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
-        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        room_rows = copy_packaged_rooms(stage)
         atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, products, rows,
                                                        room_rows))
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(stage, out)
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
     return out
 
 
@@ -197,7 +181,6 @@ def _photo_row(repo: Path, stage: Path, product: Product, photo_id: str, path: P
 def _notice(licence_text: str, commit: str | None, products: list[Product], rows: list[dict],
             room_rows: list[dict]) -> str:
     n_iconic = sum(r["use"] == REFERENCE_USE for r in rows)
-    room_sources = "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in room_rows}))
     return f"""# Sources and licences of these photos
 
 - `photos/` ({n_iconic} iconic product images and {len(rows) - n_iconic} store photos of
@@ -209,7 +192,7 @@ def _notice(licence_text: str, commit: str | None, products: list[Product], rows
   Licence: **MIT**, copied below. Each photo's path in that repository is in `photos.csv`.
   Changes: file names, masks added.
 - `rooms/` ({len(room_rows)} photos, copied from the look-alike source shipped with pin_match, which
-  re-encoded them as JPEG): {room_sources}; each room's path there is in `rooms.csv`.
+  re-encoded them as JPEG): {room_sources(room_rows)}; each room's path there is in `rooms.csv`.
 
 ## Licence of the Grocery Store Dataset
 

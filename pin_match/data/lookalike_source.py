@@ -16,11 +16,15 @@ photo is one of its instance's reference views and never a frame).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io
 import math
+import os
+import shutil
 import subprocess
-from collections.abc import Sequence
+import tempfile
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -189,3 +193,38 @@ def checkout_commit(repo: Path) -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+
+
+@contextlib.contextmanager
+def staged_source(out: Path, overwrite: bool) -> Iterator[Path]:
+    """A hidden folder beside ``out`` to write a source folder into; it becomes ``out`` only if the block succeeds.
+
+    A download-and-prepare step that fails half-way leaves neither a partial source nor a
+    damaged earlier one behind.
+    """
+    if out.exists() and not overwrite:
+        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
+    atomic.ensure_dir(out.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        yield stage
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+
+
+def copy_packaged_rooms(stage: Path) -> list[dict[str, str]]:
+    """Copy the empty rooms shipped with pin_match into a source folder being written; their rows."""
+    rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
+    for r in rows:
+        atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
+    write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
+    return rows
+
+
+def room_sources(rows: list[dict[str, str]]) -> str:
+    """The rooms' licences and sources, once each, for a source folder's NOTICE."""
+    return "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in rows}))

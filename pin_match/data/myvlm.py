@@ -30,9 +30,6 @@ README puts the dataset under it). The photos are downloaded by the user, never 
 
 from __future__ import annotations
 
-import os
-import shutil
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -43,14 +40,15 @@ from pin_match import atomic
 from pin_match.data.compose import largest_piece
 from pin_match.data.lookalike_source import (
     OPTIONAL_PHOTO_COLUMNS,
-    PACKAGED_SRC,
     PHOTO_COLUMNS,
-    ROOM_COLUMNS,
     LookalikeError,
     category_splits,
     checkout_commit,
+    copy_packaged_rooms,
     read_csv,
     read_rgb,
+    room_sources,
+    staged_source,
     write_csv,
 )
 from pin_match.data.mask_check import mask_problems
@@ -183,28 +181,15 @@ def prepare_myvlm(myvlm_repo: str | Path, out: str | Path, *, boxes: str | Path 
                .is_file()]
     if missing:
         raise LookalikeError(f"{repo / CONCEPT_FOLDER} lacks photos boxed in {boxes}: {missing}")
-    if out.exists() and not overwrite:
-        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
     commit = checkout_commit(repo)
     source = f"{MYVLM_SOURCE}@{commit}" if commit else MYVLM_SOURCE
     split = category_splits(list({p.concept: p for p in photos if p.box}.values()))  # one entry per concept
-    atomic.ensure_dir(out.parent)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
+    with staged_source(out, overwrite) as stage:
         rows, left_out = _write_photos(repo, stage, photos, source, split)
         write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
-        for r in room_rows:
-            atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
-        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        room_rows = copy_packaged_rooms(stage)
         atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, rows, left_out,
                                                        room_rows))
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(stage, out)
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
     return out
 
 
@@ -241,7 +226,6 @@ def _photo_row(repo: Path, stage: Path, p: BoxedPhoto, source: str, split: dict[
 
 def _notice(licence_text: str, commit: str | None, rows: list[dict], left_out: list[tuple[BoxedPhoto, str]],
             room_rows: list[dict]) -> str:
-    room_sources = "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in room_rows}))
     dropped = "\n".join(f"  - `{p.concept}/{p.file}`: {why}" for p, why in sorted(left_out, key=lambda t: t[0].file))
     return f"""# Sources and licences of these photos
 
@@ -259,7 +243,7 @@ def _notice(licence_text: str, commit: str | None, rows: list[dict], left_out: l
 - Photos left out ({len(left_out)}):
 {dropped}
 - `rooms/` ({len(room_rows)} photos, copied from the look-alike source shipped with pin_match):
-  {room_sources}; each room's path there is in `rooms.csv`.
+  {room_sources(room_rows)}; each room's path there is in `rooms.csv`.
 
 ## Licence of MyVLM
 
