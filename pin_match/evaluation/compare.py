@@ -15,6 +15,7 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation import html
 from pin_match.evaluation.evaluator import split_frames
 from pin_match.evaluation.gallery import draw_frame, frame_points, frame_roles, thumbnail
+from pin_match.evaluation.labels import frame_labels
 from pin_match.evaluation.paired import disagreements, first_match_outcomes, mcnemar, paired_comparison
 from pin_match.evaluation.sigma import SigmaChoice
 from pin_match.evaluation.tables import markdown_table
@@ -24,11 +25,15 @@ FILES = ("compare.csv", "compare.md", "compare.html")
 
 
 def compare(table_a: ScoreTable, table_b: ScoreTable, fs: FrameSet, sigma_a: SigmaChoice, sigma_b: SigmaChoice,
-            out_dir: str | Path, *, split: str | None = "val", n_boot: int = 1000, seed: int = 0,
-            cap: int = 12) -> tuple[pd.DataFrame, dict]:
-    """Write the comparison folder; returns the paired table (rows = metrics) and McNemar's result."""
+            out_dir: str | Path, *, split: str | None = "val", labels: pd.DataFrame | None = None,
+            n_boot: int = 1000, seed: int = 0, cap: int = 12) -> tuple[pd.DataFrame, dict]:
+    """Write the comparison folder; returns the paired table (rows = metrics) and McNemar's result.
+
+    ``labels``: ``frame_labels(fs)`` when the caller already has them (built here once otherwise).
+    """
     names = (table_a.matcher_id, table_b.matcher_id)
-    scored_a, scored_b = split_frames(table_a, fs, split), split_frames(table_b, fs, split)
+    labels = frame_labels(fs) if labels is None else labels
+    scored_a, scored_b = (split_frames(t, fs, split, labels) for t in (table_a, table_b))
     clusters = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id))
     paired = paired_comparison(scored_a, scored_b, sigma_a.value, sigma_b.value, clusters=clusters, names=names,
                                n_boot=n_boot, seed=seed)
@@ -56,7 +61,7 @@ def compare_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = 
     for other in others:
         out = Path(run_dir) / "compare" / f"{other}_vs_{first}"
         compare(run.tables[first], run.tables[other], run.frameset, choice[first], choice[other], out, split=split,
-                n_boot=n_boot)
+                labels=run.labels, n_boot=n_boot)
         pages.append(out / FILES[2])
     return pages
 
