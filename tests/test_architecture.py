@@ -148,7 +148,7 @@ IDS = {"aliked-lightglue": "aliked-lightglue@b1e6f6ad0914", "clip": "clip@e7b5fe
        "lightglue": "lightglue@d3a9e763afe1", "mobilenetv2": "mobilenetv2@7ab6b37f8755", "owl": "owl@b4264d9cba9d",
        "owl-image": "owl-image@949968ed7099", "persam": "persam@6859f62f7160", "persam-f": "persam-f@cf6e564b8302",
        "sift": "sift@6515d01cf884", "superglue": "superglue@8c14bc055a54", "xfeat": "xfeat@1fb68fd8a821"}
-COMPOSITES = {"ieve", "parts-cascade", "fusion"}
+COMPOSITES = {"ieve", "parts-cascade", "fusion", "verify"}
 
 
 @pytest.mark.parametrize("name", sorted(IDS))
@@ -202,5 +202,6 @@ def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path)
         assert init.relative_to(ROOT).as_posix() in names, f"add {package} to pyproject's packages"
     assert "pin_match/matchers/TEMPLATE.py" in names and not any(n.startswith("matchers/") for n in names)
     assert {"pin_match/data/lookalike_src/photos.csv", "pin_match/data/lookalike_src/NOTICE.md",
-            "pin_match/matchers/fusion_lookalike.json", "pin_match/data/myvlm_boxes.csv"} <= names  # real sets build
+            "pin_match/matchers/fusion_lookalike.json", "pin_match/matchers/verify_myvlm.json",
+            "pin_match/data/myvlm_boxes.csv"} <= names  # real sets build, the carried fits load
     assert sum(n.startswith("pin_match/data/lookalike_src/photos/") for n in names) == 59

@@ -1,0 +1,63 @@
+"""verify against the default effnet: the cost per frame of locating, zooming and re-identifying, side by side.
+
+Figures (docs/performance.md): seconds per frame of ``matcher.match`` on real-photo frames
+(640x360, one episode's target prepared once) for the default ``effnet``, the default
+``verify`` and ``verify`` without its keypoint signal (no ``xfeat`` on the candidates),
+interleaved, the fastest of the repeats; the ratio verify / effnet. Target: at most 2.
+
+``python -m benchmarks.bench_verify [--quick]``.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from benchmarks.framesets import real_photos
+from benchmarks.timing import fastest
+from pin_match import create_matcher
+from pin_match.training.verifier import fit_verifier
+
+TARGET_RATIO = 2.0
+NO_KEYPOINTS = ("proto", "margin", "desc", "cycle", "color")
+
+
+def no_keypoints_file(fs, folder: Path) -> str:
+    """A verifier file for the signals without keypoints, fitted on the real-photo set: only its cost is read here."""
+    path = folder / "verify_no_keypoints.json"
+    if not path.exists():
+        fit_verifier([fs], path, split="val", overrides={"signals": NO_KEYPOINTS}, out=folder)
+    return str(path)
+
+
+def run(quick: bool = False) -> dict:
+    fs = real_photos()
+    folder = fs.root.parent / "verify_bench"
+    matchers = {"effnet": create_matcher("effnet"), "verify": create_matcher("verify"),
+                "verify without keypoints": create_matcher("verify", signals=NO_KEYPOINTS,
+                                                           weights=no_keypoints_file(fs, folder))}
+    episode = fs.episodes.iloc[0]
+    target = fs.target(episode.target_object_id)
+    images = [fs.image(f) for f in fs.frames.frame_id[fs.frames.episode_id == episode.episode_id]]
+    n = 3 if quick else len(images)
+    for matcher in matchers.values():
+        matcher.prepare(target)
+        matcher.match(images[0])  # warm-up: weights loaded, first-call allocations done
+    sides = {name: (lambda m=m: [m.match(im) for im in images[:n]]) for name, m in matchers.items()}
+    best = fastest(sides, 1 if quick else 3)
+    out = {name: dict(s_per_frame=round(t.wall_s / n, 4), cpu_s_per_frame=round(t.cpu_s / n, 4))
+           for name, t in best.items()}
+    base = best["effnet"].wall_s
+    print(f"matcher.match per frame, {n} real-photo frames, fastest of interleaved runs (target verify / effnet "
+          f"<= {TARGET_RATIO:g}):")
+    print(f"{'matcher':<26} {'s/frame':>8} {'CPU s/frame':>12} {'x effnet':>9}")
+    for name, t in best.items():
+        out[name]["x_effnet"] = round(t.wall_s / base, 3)
+        print(f"{name:<26} {t.wall_s / n:8.3f} {t.cpu_s / n:12.3f} {t.wall_s / base:9.2f}")
+    out["target_holds"] = out["verify"]["x_effnet"] <= TARGET_RATIO
+    return out
+
+
+if __name__ == "__main__":
+    import sys
+
+    run(quick="--quick" in sys.argv)

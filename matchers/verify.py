@@ -1,0 +1,277 @@
+"""``verify``: locate with a patch map, zoom on each candidate, re-identify it, check its colour.
+
+A prototype averaged over the reference's mask and compared with a frame's coarse cells keeps
+what a category shares and loses what tells two instances apart: an object 60 px tall covers
+two or three stride-32 cells, each half background. Instance detectors for unseen objects
+(CNOS, NIDS-Net) instead propose a region first and then compare the region's own descriptor
+with the references'. This matcher does that with the default ``effnet``:
+
+1. **Locate**: the ``locate`` part's patch map (``effnet``: head at 448 px, PIN's crops) gives
+   up to ``candidates`` regions: a peak and the cells around it within ``region_drop`` of its
+   score, grown to a box of the reference's aspect ratio (``matchers/candidates.py``).
+2. **Zoom**: each box is cut from the frame at its own resolution and embedded again at
+   ``zoom_size`` (the ``zoom`` part: the locate network at that input size); each reference view
+   is cut to its mask's box and embedded the same way.
+3. **Re-identify**, one signal each, any of which ``signals`` may leave out:
+   ``proto`` the locate peak; ``margin`` the peak minus the best other candidate's;
+   ``desc`` the cosine of the candidate's foreground-averaged descriptor with the best view's
+   (foreground: the candidate's cells weighted by how much each resembles the references);
+   ``cycle`` the mutual cell matches between candidate and view, weighted by cosine, over the
+   view's cells (``effnet-parts``' mutual rule); ``color`` the Bhattacharyya overlap of the
+   candidate's foreground HSV histogram with the references' masked one; ``keypoints``
+   log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop.
+4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
+   split by ``pin_match.training.verifier.fit_verifier``; its content is hashed into the id):
+   each candidate's score is the fitted probability that it is the target, the frame's is its
+   best candidate's. A probability means the same on every frame-set (as far as the fit
+   carries, docs/instance-matchers.md): default sigma 0.5. Points are the candidates' cells,
+   each with its candidate's score, and the boxes come back with the result.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+import torch
+import torch.nn.functional as F
+
+from pin_match.contract import (
+    ConfigError,
+    MatcherConfig,
+    MatcherError,
+    MatchResult,
+    Modality,
+    Target,
+    WeightsError,
+    crop_boxes,
+    register_matcher,
+    weights_field,
+)
+from pin_match.matchers.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
+from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
+from pin_match.matchers.fusion import FusionWeightsSpec
+from pin_match.matchers.parts import part_matches, reference_cells
+from pin_match.matchers.patch import PatchSimilarityMatcher, alpha_to_grid
+from pin_match.nn.prototypes import masked_mean
+
+SIGNALS = ("proto", "margin", "desc", "cycle", "color", "keypoints")
+VERIFIER_FORMAT = "pin-match-verifier"
+VERIFIER_VERSION = 1
+# a candidate crop is a few hundred pixels: half the keypoints of a whole frame cover it
+KEYPOINT_DEFAULTS = {"crops": "whole", "max_keypoints": 256}
+REFERENCE_PAD = 0.1  # a reference view is cut to its mask's box plus this share per side, as a candidate is padded
+
+
+@dataclass
+class VerifyConfig(MatcherConfig):
+    """The parts, the signals and how candidates are drawn; ``weights`` is the verifier file."""
+
+    weights: str | None = weights_field()
+    locate: str = field(default="effnet", metadata={"help": "patch matcher whose map proposes candidates"})
+    locate_cfg: dict[str, Any] = part_cfg_field("locate")
+    zoom_size: int = field(default=256, metadata={"help": "input side at which candidates and views are embedded"})
+    keypoints: str = field(default="xfeat", metadata={"help": "keypoint matcher run on each candidate crop"})
+    keypoints_cfg: dict[str, Any] = part_cfg_field("keypoints")
+    signals: tuple[str, ...] = field(default=SIGNALS, metadata={"help": f"signals used, of {', '.join(SIGNALS)}"})
+    candidates: int = field(default=3, metadata={"help": "candidate regions verified per frame"})
+    region_drop: float = field(default=0.1, metadata={"help": "a region holds the cells within this of its peak"})
+    pad: float = field(default=0.15, metadata={"help": "share of a candidate box added on each side"})
+    color_bins: tuple[int, ...] = field(default=(16, 4, 4), metadata={"help": "HSV histogram bins"})
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        unknown = sorted(set(self.signals) - set(SIGNALS))
+        if unknown or not self.signals or len(set(self.signals)) != len(self.signals):
+            raise ConfigError(f"{type(self).__name__}: signals={self.signals!r}; name each of {', '.join(SIGNALS)} "
+                              f"at most once, at least one")
+        if self.candidates < 1 or self.zoom_size < 32 or self.zoom_size % 32:
+            raise ConfigError(f"{type(self).__name__}: candidates must be >= 1 and zoom_size a multiple of 32")
+        if len(self.color_bins) != 3 or min(self.color_bins) < 1:
+            raise ConfigError(f"{type(self).__name__}: color_bins={self.color_bins!r}; three positive counts (H, S, V)")
+        if not 0.0 <= self.pad <= 1.0 or self.region_drop < 0.0:
+            raise ConfigError(f"{type(self).__name__}: pad must be in [0, 1] and region_drop >= 0")
+
+
+@dataclass
+class Reference:
+    """The target as the zoomed signals see it: one descriptor per view, the views' mask cells, their colours."""
+
+    descriptors: torch.Tensor  # (V, D) foreground averages
+    cells: torch.Tensor        # (R, D) cells on the masks
+    cell_views: torch.Tensor   # (R,) the view of each
+    histogram: np.ndarray      # HSV histogram of every view's masked pixels
+    aspect: float              # median width / height of the views' mask boxes
+
+
+def read_verifier(path: Path) -> dict[str, Any]:
+    """The verifier file, checked: every problem is a WeightsError naming the file."""
+    try:
+        spec = json.loads(path.read_text())
+    except (OSError, ValueError) as exc:
+        raise WeightsError(f"verifier file {path}: cannot read it as JSON ({exc})") from exc
+    if not isinstance(spec, dict) or spec.get("format") != VERIFIER_FORMAT or spec.get("version") != VERIFIER_VERSION:
+        raise WeightsError(f"verifier file {path}: not a {VERIFIER_FORMAT} file of version {VERIFIER_VERSION}")
+    coefs = spec.get("coefs")
+    numbers = [*coefs.values(), spec.get("intercept")] if isinstance(coefs, dict) else []
+    if not numbers[:-1] or set(coefs) - set(SIGNALS) \
+            or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers):
+        raise WeightsError(f"verifier file {path}: needs a finite 'intercept' and 'coefs' {{signal: finite number}} "
+                           f"over signals of {', '.join(SIGNALS)}")
+    return spec
+
+
+def verdict(spec: dict[str, Any], signals: dict[str, float]) -> float:
+    """The fitted probability that a candidate with these signals is the target."""
+    logit = float(spec["intercept"]) + sum(float(c) * signals[s] for s, c in spec["coefs"].items())
+    return 1.0 / (1.0 + math.exp(-min(max(logit, -60.0), 60.0)))
+
+
+@register_matcher("verify")
+class VerifyMatcher(CompositeMatcher):
+    """Locate, zoom, re-identify, check colour; a fitted fusion decides (see module doc)."""
+
+    Config = VerifyConfig
+    modality = Modality.VISUAL
+    weights_spec = FusionWeightsSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
+                                     distribution="pin-match",
+                                     license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
+    default_sigma = 0.5  # probability 1/2 under the fit's class weights
+    version = 1
+    paper = ("detect, then re-identify (CNOS, Nguyen et al., ICCVW 2023; NIDS-Net, Lu et al., 2024) with "
+             "cycle-consistent cell matches (Matcher, Liu et al., ICLR 2024) and a colour check (PInVerify, 2026)")
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        super().__init__(cfg)
+        cfg = self.cfg
+        self.locator = self._patch_part("locate", {})
+        self.zoomer = self._patch_part("zoom", {"img_size": cfg.zoom_size, "crops": "whole"})
+        # built (no weights load) even when its signal is off, so every signal set shares one signals_id and cache
+        self.keypointer = self.add_part("keypoints", cfg.keypoints, cfg.keypoints_cfg, KEYPOINT_DEFAULTS)
+        self.require_visual()
+        self._reference: Reference | None = None
+
+    def _patch_part(self, role: str, defaults: dict[str, Any]) -> PatchSimilarityMatcher:
+        part = self.add_part(role, self.cfg.locate, self.cfg.locate_cfg, defaults)
+        if not isinstance(part, PatchSimilarityMatcher):
+            raise ConfigError(f"matcher {self.display_name}: locate={self.cfg.locate!r} has no patch map; choose a "
+                              f"patch matcher such as effnet")
+        return part
+
+    @property
+    def signals_id(self) -> str:
+        """Hash of everything the signals' values depend on: not the verifier file, nor which signals are used (an
+        ablation reads the same cached signals)."""
+        config = self.cfg.hashed_dict()
+        config.pop("weights", None)
+        config.pop("signals")
+        payload = dict(version=self.version, config=config, parts={r: p.id for r, p in self.parts().items()})
+        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
+
+    @cached_property
+    def decision(self) -> dict[str, Any]:
+        """The verifier file, refused unless it was fitted on exactly this matcher's signals."""
+        path = self.weights_spec.resolve(self.cfg.weights, f"matcher {self.display_name}")
+        spec = read_verifier(path)
+        if set(spec["coefs"]) != set(self.cfg.signals) or spec.get("signals_id") != self.signals_id:
+            raise WeightsError(f"verifier file {path} was fitted on signals {sorted(spec['coefs'])} (signals id "
+                               f"{spec.get('signals_id')}), this matcher computes {sorted(self.cfg.signals)} (signals "
+                               f"id {self.signals_id}): refit it with pin_match.training.verifier.fit_verifier")
+        return spec
+
+    def weights_hint(self, role: str) -> str:
+        return f"set {role}_cfg.weights=" if role != "zoom" else "set locate_cfg.weights="
+
+    def _prepare(self, target: Target) -> None:
+        super()._prepare(target)
+        backbone = self.zoomer.backbone
+        cuts, alphas, aspects = [], [], []
+        for view in target.views:
+            aspect, (x0, y0, x1, y1) = mask_aspect(view[..., 3])
+            px, py = round(REFERENCE_PAD * (x1 - x0)), round(REFERENCE_PAD * (y1 - y0))
+            cut = view[max(y0 - py, 0):y1 + py, max(x0 - px, 0):x1 + px]
+            cuts.append(np.ascontiguousarray(cut[..., :3]))
+            alphas.append(alpha_to_grid(cut[..., 3], backbone.grid).reshape(-1))
+            aspects.append(aspect)
+        feats = backbone.encode(cuts).patches
+        cells, views = [], []
+        for i, alpha in enumerate(alphas):
+            keep = reference_cells(alpha, 0.5)
+            cells.append(feats[i, keep])
+            views.append(torch.full((len(keep),), i))
+        hist = sum(color_histogram(v[..., :3], v[..., 3] / 255.0, self.cfg.color_bins) for v in target.views)
+        self._reference = Reference(descriptors=masked_mean(feats, torch.stack(alphas)), cells=torch.cat(cells),
+                                    cell_views=torch.cat(views), histogram=hist / len(target.views),
+                                    aspect=float(np.median(aspects)))
+
+    @property
+    def reference(self) -> Reference:
+        if self._reference is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) first")
+        return self._reference
+
+    # ------------------------------------------------------------------ signals
+    @torch.inference_mode()
+    def candidate_signals(self, images: list[np.ndarray]) -> list[list[tuple[Candidate, dict[str, float]]]]:
+        """Per image, its candidates with their signals: what the verifier file weighs, and what it is fitted on."""
+        cfg, ref = self.cfg, self.reference
+        located = self.locator.match_batch(images)
+        per_image, crops = [], []
+        for image, result in zip(images, located):
+            plan = crop_boxes(image.shape[0], image.shape[1], self.locator.cfg.crops)
+            found = locate(result.heatmap, plan, image.shape[:2], count=cfg.candidates, drop=cfg.region_drop,
+                           aspect=ref.aspect, pad=cfg.pad)
+            per_image.append(found)
+            crops += [np.ascontiguousarray(image[c.box[1]:c.box[3], c.box[0]:c.box[2]]) for c in found]
+        feats = self.zoomer.backbone.encode(crops).patches
+        matches = [r.score for r in self.keypointer.match_batch(crops)] if "keypoints" in cfg.signals \
+            else [0.0] * len(crops)
+        out, k = [], 0
+        for found in per_image:
+            peaks = [c.peak for c in found]
+            rows = []
+            for i, cand in enumerate(found):
+                others = peaks[:i] + peaks[i + 1:]
+                signals = self._zoom_signals(crops[k], feats[k])
+                signals.update(proto=cand.peak, margin=cand.peak - max(others) if others else 0.0,
+                               keypoints=math.log1p(max(float(matches[k]), 0.0)))
+                rows.append((cand, {s: signals[s] for s in cfg.signals}))
+                k += 1
+            out.append(rows)
+        return out
+
+    def _zoom_signals(self, crop: np.ndarray, cells: torch.Tensor) -> dict[str, float]:
+        ref = self.reference
+        likeness = (F.normalize(cells, dim=-1) @ F.normalize(ref.descriptors, dim=-1).T).amax(1)
+        weight = (likeness - likeness.median()).clamp(min=0)
+        if float(weight.sum()) <= 0:
+            weight = torch.ones_like(weight)
+        descriptor = masked_mean(cells, weight)
+        desc = float((F.normalize(descriptor, dim=0) @ F.normalize(ref.descriptors, dim=-1).T).max())
+        cycle = part_matches(ref.cells, ref.cell_views, cells, "mutual", 1.0)[0]
+        grid = self.zoomer.backbone.grid
+        pixels = cv2.resize(weight.reshape(grid, grid).numpy().astype(np.float32), (crop.shape[1], crop.shape[0]),
+                            interpolation=cv2.INTER_LINEAR)
+        color = bhattacharyya(color_histogram(crop, pixels, self.cfg.color_bins), ref.histogram)
+        return {"desc": desc, "cycle": cycle, "color": color}
+
+    # ------------------------------------------------------------------ decision
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        spec = self.decision
+        results = []
+        for rows in self.candidate_signals(images):
+            scores = np.array([verdict(spec, signals) for _, signals in rows], np.float32)
+            cands = [c for c, _ in rows]
+            results.append(MatchResult(
+                score=float(scores.max()), points=np.concatenate([c.points for c in cands]),
+                point_scores=np.concatenate([np.full(len(c.points), s, np.float32) for c, s in zip(cands, scores)]),
+                boxes=np.array([c.box for c in cands], np.float32), box_scores=scores))
+        return results
+

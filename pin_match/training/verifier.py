@@ -1,0 +1,134 @@
+"""Fit a ``verify`` file: logistic regression on the signals of candidate regions of train splits.
+
+The verifier (``matchers/verify.py``) scores candidate regions, not frames, so it is fitted on
+candidates: one drawn on the target (it holds at least half of the target's visible pixels,
+or the target fills a quarter of it) is a positive; every candidate of a frame without the
+target is a negative, of the same-category class when a look-alike is in view and of the
+other class otherwise; a candidate beside the target in a target frame says nothing about
+the target's signals and is left out. The three classes weigh the same, as in the score
+fusion. The signals of every candidate of a frame-set are computed once and cached by the
+matcher's ``signals_id`` and the frame-set's fingerprint, so fits, ablations (signals left
+out) and evaluations reuse them; the frame score from cached signals is the matcher's own.
+"""
+
+from __future__ import annotations
+
+import sys
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from pin_match import atomic, outputs
+from pin_match.contract.registry import create_matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.labels import frame_labels
+from pin_match.matchers.verify import SIGNALS, VERIFIER_FORMAT, VERIFIER_VERSION, VerifyMatcher, read_verifier, verdict
+from pin_match.training.config import TrainingError
+from pin_match.training.fusion import logistic_fit
+
+ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
+TARGET_FILL = 0.25     # ... or of the box covered by the target
+
+
+def on_target(box: Sequence[int], target: np.ndarray) -> bool:
+    """Whether a candidate box is drawn on the target, whose visible pixels are the boolean mask ``target``."""
+    total = int(target.sum())
+    if not total:
+        return False
+    x0, y0, x1, y1 = box
+    inside = int(target[y0:y1, x0:x1].sum())
+    return inside >= ON_TARGET_SHARE * total or inside >= TARGET_FILL * max((x1 - x0) * (y1 - y0), 1)
+
+
+def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = outputs.FEATURES, batch_size: int = 4,
+                    progress: bool = False) -> pd.DataFrame:
+    """One row per candidate of every frame of ``fs``: its box, whether it is on the target, its signals.
+
+    Cached by the matcher's ``signals_id``: a table holding the signals asked for is read, whatever else it holds.
+    """
+    splits = "+".join(sorted(set(fs.episodes.split)))  # a split of a frame-set keeps the whole set's fingerprint
+    cache = Path(out) / "verify-signals" / matcher.signals_id / f"{fs.fingerprint[:16]}_{splits}.parquet"
+    if cache.exists():
+        table = pd.read_parquet(cache)
+        if set(matcher.cfg.signals) <= set(table.columns):
+            return table
+    rows = []
+    for n, episode in enumerate(fs.episodes.itertuples(), 1):
+        matcher.prepare(fs.target(episode.target_object_id))
+        frames = fs.frames[fs.frames.episode_id == episode.episode_id]
+        for start in range(0, len(frames), batch_size):
+            ids = list(frames.frame_id.iloc[start:start + batch_size])
+            for frame_id, found in zip(ids, matcher.candidate_signals([fs.image(f) for f in ids])):
+                target = fs.object_pixels(frame_id, episode.target_object_id)
+                for k, (cand, signals) in enumerate(found):
+                    rows.append(dict(frame_id=frame_id, episode_id=episode.episode_id, split=episode.split,
+                                     candidate=k, x0=cand.box[0], y0=cand.box[1], x1=cand.box[2], y1=cand.box[3],
+                                     on_target=on_target(cand.box, target), **signals))
+        if progress:
+            print(f"verify signals: {fs.root.name} episode {n}/{len(fs.episodes)}", file=sys.stderr)
+    table = pd.DataFrame(rows)
+    atomic.write_parquet(cache, table)
+    return table
+
+
+def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, dict[str, int]]:
+    """The candidates a fit uses, their sample weights (each class summing to 1) and the class counts."""
+    frame = labels.set_index("frame_id")
+    target_frame = table.frame_id.map(frame.target_visible).to_numpy(bool)
+    same_frame = table.frame_id.map(frame.same_visible).to_numpy(bool)
+    positive = table.on_target.to_numpy(bool) & target_frame
+    keep = positive | ~target_frame
+    classes = {"target": positive, "same_category": ~target_frame & same_frame, "other": ~target_frame & ~same_frame}
+    counts = {name: int(mask.sum()) for name, mask in classes.items()}
+    if not counts["target"] or not counts["same_category"] + counts["other"]:
+        raise TrainingError(f"verifier fit needs candidates on the target and in frames without it; got {counts}")
+    weights = np.zeros(len(table))
+    for mask in classes.values():
+        if mask.any():
+            weights[mask] = 1.0 / mask.sum()
+    return table[keep].reset_index(drop=True), weights[keep], counts
+
+
+def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *, split: str = "train",
+                 overrides: dict[str, Any] | None = None, out: str | Path = outputs.FEATURES, l2: float = 1.0,
+                 progress: bool = False) -> dict[str, Any]:
+    """Fit the signals' weights on ``split`` of every frame-set together and write the verifier file (atomically).
+
+    ``overrides`` configure the ``verify`` matcher (``signals`` leaves some out, for an ablation);
+    the file records its ``signals_id``, so the matcher refuses it for other signals.
+    """
+    matcher = create_matcher("verify", **(overrides or {}))
+    tables, labels, sources = [], [], []
+    for i, item in enumerate(framesets):
+        fs = item if isinstance(item, FrameSet) else FrameSet.load(item)
+        table = candidate_table(fs, matcher, out=out, progress=progress)
+        # two variants of one source share frame ids: the set's position keeps them apart
+        tables.append(table[table.split == split].assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
+        labels.append(frame_labels(fs).assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
+        sources.append(dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint))
+    used, weights, counts = candidate_classes(pd.concat(tables, ignore_index=True), pd.concat(labels))
+    signals = list(matcher.cfg.signals)
+    y = used.on_target.to_numpy(float)
+    beta = logistic_fit(used[signals].to_numpy(float), y, weights, l2)
+    spec = dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
+                intercept=float(beta[0]), coefs={s: float(c) for s, c in zip(signals, beta[1:])},
+                fitted_on=dict(framesets=sources, split=split, candidates=len(used), classes=counts, l2=l2,
+                               objective="weighted logistic regression, candidate on the target vs candidates of "
+                                         "frames without it; target, same-category and other classes weigh the "
+                                         "same"))
+    atomic.write_json(path, spec)
+    read_verifier(Path(path))  # what was written is what the matcher accepts
+    return spec
+
+
+def frame_scores(table: pd.DataFrame, spec: dict[str, Any]) -> pd.DataFrame:
+    """Per frame, the verifier's score from cached candidate signals: its best candidate's probability."""
+    missing = set(spec["coefs"]) - set(table.columns)
+    if missing:
+        raise TrainingError(f"candidate table has no signal {sorted(missing)[0]!r} (of {', '.join(SIGNALS)})")
+    probability = [verdict(spec, row) for row in table[list(spec["coefs"])].to_dict("records")]
+    scored = table[["frame_id"]].assign(score=probability)
+    return scored.groupby("frame_id", sort=False, as_index=False).score.max()

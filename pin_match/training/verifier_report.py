@@ -1,0 +1,188 @@
+"""The verifier's ablation and how far one sigma carries, from cached candidate signals: docs/instance-matchers.md.
+
+Every signal set (each signal alone, each left out, all) is fitted on the train splits of the
+development frame-sets and read, with the same cached signals, on every evaluation set: AUROC
+of target frames against same-category look-alike frames with an episode-bootstrap interval,
+and TM / CM at the sigma tuned (PIN's first-match objective) on the development train
+splits. The default ``effnet`` comes from the same tables: the verifier's first candidate is
+the locate map's best cell, whose cosine is ``effnet``'s frame score.
+
+``python -m pin_match.training.verifier_report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT]
+[--figure PNG]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import tempfile
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from pin_match import atomic, outputs
+from pin_match.contract.registry import create_matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.metrics import auroc, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.paired import paired_comparison
+from pin_match.evaluation.sweep import sweep
+from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, choose_sigma
+from pin_match.matchers.verify import SIGNALS, verdict
+from pin_match.training.verifier import candidate_table, fit_verifier, frame_scores
+
+
+def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, tuple[str, ...]]:
+    """The ablation's rows: all signals, each alone, each left out."""
+    sets = {"all": tuple(signals)}
+    sets.update({f"{s} alone": (s,) for s in signals})
+    sets.update({f"without {s}": tuple(x for x in signals if x != s) for s in signals})
+    return sets
+
+
+def scored(fs: FrameSet, scores: pd.DataFrame, split: str | None) -> pd.DataFrame:
+    """Labels of the split's frames with their score."""
+    labels = frame_labels(fs)
+    if split is not None:
+        labels = labels[labels.split == split]
+    return labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
+
+
+def effnet_scores(table: pd.DataFrame) -> pd.DataFrame:
+    """The default ``effnet``'s frame scores: the locate peak of each frame's first candidate."""
+    first = table[table.candidate == 0]
+    return pd.DataFrame({"frame_id": first.frame_id.to_numpy(), "score": first.proto.to_numpy()})
+
+
+def auroc_same_interval(frames: pd.DataFrame, n_boot: int = 1000, seed: int = 0) -> tuple[float, float, float]:
+    """AUROC target vs same-category look-alike frames and its 95 % interval, resampling episodes."""
+    target = frames.target_visible.to_numpy(bool)
+    same = frames.same_visible.to_numpy(bool) & ~target
+    score = frames.score.to_numpy(float)
+    codes, episodes = pd.factorize(frames.episode_id)
+    rng = np.random.default_rng(seed)
+    values = []
+    for _ in range(n_boot):
+        drawn = np.bincount(rng.integers(0, len(episodes), len(episodes)), minlength=len(episodes))
+        take = np.repeat(np.arange(len(frames)), drawn[codes])
+        value = auroc(score[take][target[take]], score[take][same[take]])
+        if not np.isnan(value):
+            values.append(value)
+    low, high = np.percentile(values, [2.5, 97.5]) if values else (np.nan, np.nan)
+    return auroc(score[target], score[same]), float(low), float(high)
+
+
+def tuned_sigma(frames: pd.DataFrame) -> float:
+    """Sigma by PIN's first-match objective (pin-match tune's default) on these frames."""
+    curve = sweep(frame_arrays(frames))
+    return float(curve["sigma"].iloc[choose_sigma(curve, DEFAULT_OBJECTIVE)[0]])
+
+
+def report(train: Sequence[str], evals: Sequence[str], features: str | Path = outputs.FEATURES,
+           n_boot: int = 1000) -> dict:
+    """Every signal set and ``effnet`` on every evaluation set (val split where it has one, else all frames)."""
+    train_sets = [FrameSet.load(p) for p in train]
+    eval_sets = {}
+    for item in evals:
+        path, _, split = item.partition(":")
+        eval_sets[Path(path).name] = FrameSet.load(path).split(split or None)
+    base = create_matcher("verify")
+    tables = {name: candidate_table(fs, base, out=features) for name, fs in
+              {**{Path(p).name: fs for p, fs in zip(train, train_sets)}, **eval_sets}.items()}
+    rows, sigmas = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        specs = {label: fit_verifier(train_sets, Path(tmp) / "v.json", overrides={"signals": s}, out=features)
+                 for label, s in signal_sets().items()}
+    scorers = {"effnet": effnet_scores, **{f"verify {label}": (lambda t, s=spec: frame_scores(t, s))
+                                           for label, spec in specs.items()}}
+    for name, score_of in scorers.items():
+        dev = pd.concat([scored(fs, score_of(tables[Path(p).name]), "train").assign(  # variants share ids
+            frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
+            for i, (p, fs) in enumerate(zip(train, train_sets))])
+        sigmas[name] = tuned_sigma(dev)
+        for set_name, fs in eval_sets.items():
+            split = "val" if set_name in {Path(p).name for p in train} else None
+            frames = scored(fs, score_of(tables[set_name]), split)
+            value, low, high = auroc_same_interval(frames, n_boot)
+            at = detection_metrics(frame_arrays(frames), sigmas[name])
+            rows.append(dict(matcher=name, set=set_name, auroc_same=value, low=low, high=high,
+                             auroc=ranking_metrics(frame_arrays(frames))["auroc_target"], sigma=sigmas[name],
+                             tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"]))
+    paired = {}
+    for set_name, fs in eval_sets.items():
+        split = "val" if set_name in {Path(p).name for p in train} else None
+        a = scored(fs, effnet_scores(tables[set_name]), split)
+        b = scored(fs, frame_scores(tables[set_name], specs["all"]), split)
+        diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify all"], names=("effnet", "verify"),
+                                 n_boot=n_boot).loc["AUROC-same"]
+        paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
+                                high=float(diff["CI high"]))
+    return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs)
+
+
+def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str | Path, per_row: int = 6) -> Path:
+    """What the verifier decided, as a picture: the highest-scoring look-alike frames over the lowest-scoring target
+    frames, each with its candidate boxes (white: the best, labelled with its probability; grey: the others), the
+    objects' masks outlined in their roles' colours and the target's first reference in the corner."""
+    import cv2
+    import matplotlib.pyplot as plt
+
+    from pin_match.evaluation.gallery import draw_frame, on_checkerboard, thumbnail
+
+    frames = scored(fs, frame_scores(table, spec), None)
+    same = frames[frames.same_visible & ~frames.target_visible].nlargest(per_row, "score")
+    target = frames[frames.target_visible].nsmallest(per_row, "score")
+    fig, axes = plt.subplots(2, per_row, figsize=(2.2 * per_row, 8.4), squeeze=False)
+    for row, (title, chosen) in enumerate((("look-alike only, highest", same), ("target, lowest", target))):
+        for ax, frame in zip(axes[row], chosen.itertuples()):
+            image = draw_frame(fs, frame.frame_id)
+            cands = table[table.frame_id == frame.frame_id]
+            probability = frame_scores(cands, spec).score.iloc[0]
+            best = cands.candidate.iloc[int(np.argmax([verdict(spec, r) for r in cands.to_dict("records")]))]
+            for cand in cands.itertuples():
+                colour = (255, 255, 255) if cand.candidate == best else (140, 140, 140)
+                cv2.rectangle(image, (int(cand.x0), int(cand.y0)), (int(cand.x1) - 1, int(cand.y1) - 1), colour, 3)
+            reference = thumbnail(on_checkerboard(fs.target(fs.episode(frame.episode_id).target_object_id).views[0]),
+                                  110)
+            image[:reference.shape[0], :reference.shape[1]] = reference
+            ax.imshow(image)
+            ax.set_title(f"{title}\n{frame.frame_id[-22:]}\np={probability:.2f}", fontsize=7)
+        for ax in axes[row]:
+            ax.axis("off")
+    fig.tight_layout()
+    with atomic.atomic_path(path) as tmp:
+        fig.savefig(tmp, dpi=80, format=Path(path).suffix.lstrip(".") or "png")
+    plt.close(fig)
+    return Path(path)
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = argparse.ArgumentParser(prog="python -m pin_match.training.verifier_report",
+                                description=__doc__.splitlines()[0])
+    p.add_argument("--train", nargs="+", required=True, help="development frame-sets: fitted and tuned on train")
+    p.add_argument("--eval", nargs="+", required=True,
+                   help="frame-sets read, PATH or PATH:SPLIT (a development set: its val split)")
+    p.add_argument("--features", default=str(outputs.FEATURES), help="cache of candidate signals")
+    p.add_argument("--json", help="write the whole report here")
+    p.add_argument("--figure", help="draw the first --eval set's decisions of the whole verifier into this PNG")
+    a = p.parse_args(argv)
+    result = report(a.train, a.eval, a.features)
+    table = pd.DataFrame(result["rows"])
+    with pd.option_context("display.width", 200, "display.max_rows", 500):
+        print(table.round(3).to_string(index=False))
+    print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"]), indent=1))
+    if a.json:
+        atomic.write_json(a.json, result)
+    if a.figure:
+        path, _, split = a.eval[0].partition(":")
+        fs = FrameSet.load(path).split(split or None)
+        table = candidate_table(fs, create_matcher("verify"), out=a.features)
+        print(f"wrote {candidates_figure(fs, table, result['specs']['all'], a.figure)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

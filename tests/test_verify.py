@@ -1,0 +1,167 @@
+"""verify: candidates from hand-made maps, colour on hand-made pixels, the file checks, the fit and the live matcher."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
+from pin_match.matchers.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
+from pin_match.matchers.verify import SIGNALS, read_verifier, verdict
+from pin_match.training.verifier import candidate_classes, candidate_table, fit_verifier, frame_scores, on_target
+
+FAST = dict(signals=("proto", "margin", "desc", "color"), candidates=2)  # no keypoints: quick
+
+
+# ------------------------------------------------------------------ candidates
+def test_region_is_the_connected_cells_near_the_peak():
+    scores = np.array([[0.9, 0.85, 0.1],
+                       [0.2, 0.82, 0.1],
+                       [0.86, 0.1, 0.1]], np.float32)
+    region = region_cells(scores, 0, 0, 0.1)
+    # (2, 0) is within 0.1 of the peak but not connected to it
+    assert region.tolist() == [[True, True, False], [False, True, False], [False, False, False]]
+
+
+def test_shaped_box_grows_to_the_aspect_pads_and_stays_in_the_frame():
+    # a 20 x 20 region, aspect 0.5 (tall): 20 x 40, padded by 25 % a side: 30 x 60, centred on (110, 110)
+    assert shaped_box(100, 100, 120, 120, 0.5, 0.25, 10, 360, 640) == (95, 80, 125, 140)
+    # at the frame's corner the box is shifted in, not cut
+    assert shaped_box(0, 0, 20, 20, 1.0, 0.0, 40, 360, 640) == (0, 0, 40, 40)
+    # never larger than the frame
+    assert shaped_box(0, 0, 360, 600, 2.0, 0.5, 10, 360, 640) == (0, 0, 360, 640)
+
+
+def test_locate_orders_peaks_and_merges_cells_of_an_earlier_box():
+    crops = [Crop(0, 0, 40, 40), Crop(0, 20, 40, 40)]  # two overlapping crops of a 60 x 40 frame, 4 x 4 cells
+    maps = np.zeros((2, 4, 4), np.float32)
+    maps[0, 2, 0] = 0.9   # cell centre (5, 25): a box of at least 2 cells, 20 px a side
+    maps[1, 0, 0] = 0.8   # the same place seen by the second crop: inside the first box, skipped
+    maps[1, 3, 3] = 0.7   # centre (35, 55): a second candidate
+    found = locate(maps, crops, (60, 40), count=3, drop=0.05, aspect=1.0, pad=0.0)
+    assert [c.peak for c in found[:2]] == pytest.approx([0.9, 0.7])
+    assert found[0].box == (0, 15, 20, 35) and found[1].box == (20, 40, 40, 60)
+    assert found[0].points.tolist() == [[5.0, 25.0]] and found[1].points.tolist() == [[35.0, 55.0]]
+    assert len(found) == 3  # the third is the best cell outside both boxes (a zero)
+
+
+def test_colour_overlap_tells_red_from_blue_and_follows_the_weights():
+    red = np.zeros((8, 8, 3), np.uint8)
+    red[..., 0] = 220
+    blue = red[..., ::-1].copy()
+    ones = np.ones((8, 8))
+    p, q = color_histogram(red, ones, (16, 4, 4)), color_histogram(blue, ones, (16, 4, 4))
+    assert p.sum() == pytest.approx(1.0) and bhattacharyya(p, p) == pytest.approx(1.0)
+    assert bhattacharyya(p, q) == pytest.approx(0.0)
+    half = np.concatenate([red[:4], blue[4:]])
+    weights = np.r_[np.ones(4), np.zeros(4)][:, None] * np.ones((1, 8))  # only the red half is the object
+    assert bhattacharyya(color_histogram(half, weights, (16, 4, 4)), p) == pytest.approx(1.0)
+    assert bhattacharyya(color_histogram(half, ones, (16, 4, 4)), p) == pytest.approx(np.sqrt(0.5))
+
+
+# ------------------------------------------------------------------ fit rules
+def test_a_candidate_is_on_the_target_by_share_or_fill():
+    target = np.zeros((100, 100), bool)
+    target[10:30, 10:30] = True  # 400 pixels
+    assert on_target((0, 0, 20, 30), target)       # 200 of 400 inside: half of the target
+    assert not on_target((0, 0, 15, 100), target)  # 100 inside: a quarter of the target, 7 % of the box
+    assert on_target((25, 25, 35, 35), target)     # 25 inside a 100-pixel box: it fills a quarter
+    assert not on_target((0, 0, 50, 50), np.zeros((100, 100), bool))
+
+
+def test_candidate_classes_drop_off_target_candidates_of_target_frames_and_balance_classes():
+    labels = pd.DataFrame(dict(frame_id=["t", "s", "o"], target_visible=[True, False, False],
+                               same_visible=[False, True, False]))
+    table = pd.DataFrame(dict(frame_id=["t", "t", "s", "s", "o"], on_target=[True, False, False, False, False]))
+    used, weights, counts = candidate_classes(table, labels)
+    assert used.frame_id.tolist() == ["t", "s", "s", "o"]
+    assert weights.tolist() == [1.0, 0.5, 0.5, 1.0]
+    assert counts == {"target": 1, "same_category": 2, "other": 1}
+
+
+# ------------------------------------------------------------------ the file
+def verifier_file(path, signals_id, coefs, intercept=-1.0):
+    path.write_text(json.dumps(dict(format="pin-match-verifier", version=1, signals_id=signals_id,
+                                    intercept=intercept, coefs=coefs)))
+    return path
+
+
+def test_verdict_is_the_logistic_of_the_file():
+    spec = dict(intercept=-1.0, coefs={"proto": 2.0, "color": 4.0})
+    assert verdict(spec, {"proto": 0.5, "color": 0.25}) == pytest.approx(1 / (1 + np.exp(-1.0)))
+
+
+def test_bad_files_and_configs_are_refused_by_name(tmp_path):
+    with pytest.raises(ConfigError, match="signals="):
+        create_matcher("verify", signals=("proto", "shape"))
+    with pytest.raises(ConfigError, match="color_bins"):
+        create_matcher("verify", color_bins=(16, 4))
+    bad = tmp_path / "bad.json"
+    bad.write_text("{")
+    with pytest.raises(WeightsError, match="bad.json"):
+        read_verifier(bad)
+    with pytest.raises(WeightsError, match="finite 'intercept'"):
+        read_verifier(verifier_file(tmp_path / "v.json", "x", {"shape": 1.0}))
+    matcher = create_matcher("verify", **FAST)
+    stale = verifier_file(tmp_path / "stale.json", "000000000000", {s: 1.0 for s in FAST["signals"]})
+    with pytest.raises(WeightsError, match="stale.json was fitted on .*refit"):
+        _ = create_matcher("verify", weights=str(stale), **FAST).decision
+    other = verifier_file(tmp_path / "other.json", matcher.signals_id, {"proto": 1.0})
+    with pytest.raises(WeightsError, match="other.json was fitted on signals"):
+        _ = create_matcher("verify", weights=str(other), **FAST).decision
+
+
+def test_the_id_hashes_the_file_and_the_signals_id_does_not(tmp_path):
+    matcher = create_matcher("verify", **FAST)
+    path = verifier_file(tmp_path / "v.json", matcher.signals_id, {s: 1.0 for s in FAST["signals"]})
+    first = create_matcher("verify", weights=str(path), **FAST).id
+    verifier_file(path, matcher.signals_id, {s: 2.0 for s in FAST["signals"]})
+    second = create_matcher("verify", weights=str(path), **FAST)
+    assert first != second.id and second.signals_id == matcher.signals_id
+    assert create_matcher("verify", **{**FAST, "zoom_size": 224}).signals_id != matcher.signals_id
+
+
+# ------------------------------------------------------------------ fit and live matcher
+def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(tiny_frameset, tmp_path):
+    every = dict(candidates=2)  # all signals, keypoints included
+    spec = fit_verifier([tiny_frameset], tmp_path / "all.json", split="train", overrides=every,
+                        out=tmp_path / "features")
+    assert spec["fitted_on"]["classes"]["target"] >= 1 and set(spec["coefs"]) == set(SIGNALS)
+    # an ablation reads the same cached signals: one table, one signals id
+    path = tmp_path / "v.json"
+    spec = fit_verifier([tiny_frameset], path, split="train", overrides=FAST, out=tmp_path / "features")
+    assert len(list((tmp_path / "features").rglob("*.parquet"))) == 1
+    assert set(spec["coefs"]) == set(FAST["signals"])
+    matcher = create_matcher("verify", weights=str(path), **FAST)
+    table = candidate_table(tiny_frameset, matcher, out=tmp_path / "features")  # read from the cache
+    assert set(table.frame_id) == set(tiny_frameset.frames.frame_id)
+    cached = dict(zip(*frame_scores(table, spec).T.to_numpy()))
+    episode = tiny_frameset.episodes.iloc[1]
+    matcher.prepare(tiny_frameset.target(episode.target_object_id))
+    ids = list(tiny_frameset.frames.frame_id[tiny_frameset.frames.episode_id == episode.episode_id])
+    results = matcher.match_batch([tiny_frameset.image(f) for f in ids])
+    assert [r.score for r in results] == pytest.approx([cached[f] for f in ids], abs=1e-6)
+    for r in results:
+        assert 0.0 < r.score < 1.0 and r.score == pytest.approx(float(r.box_scores.max()))
+        assert len(r.points_at(r.score)) >= 1 and len(r.points_at(r.score + 1e-3)) == 0
+    target_frame = results[0]  # frame 0 shows the target, a disc at (100, 300) + 96 px
+    x0, y0, x1, y1 = target_frame.boxes[int(np.argmax(target_frame.box_scores))]
+    assert x0 <= 148 <= x1 and y0 <= 348 <= y1
+
+
+def test_contract_with_real_weights(tmp_path):
+    matcher = create_matcher("verify", **FAST)
+    path = verifier_file(tmp_path / "v.json", matcher.signals_id, {s: 1.0 for s in FAST["signals"]})
+    scores = check_matcher("verify", weights=str(path), **FAST)
+    assert all(0.0 < s < 1.0 for s in scores.values())
+
+
+def test_the_carried_verifier_file_fits_the_default_signals():
+    """The shipped file records the signals id it was fitted for; a change that moves it (a new hashed config field,
+    a version bump, new weights of a part) makes ``verify`` refuse the file, so such a change must refit it."""
+    matcher = create_matcher("verify")
+    assert matcher.decision["signals_id"] == matcher.signals_id
+    assert set(matcher.decision["coefs"]) == set(SIGNALS)
