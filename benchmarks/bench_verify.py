@@ -2,8 +2,9 @@
 
 Figures (docs/performance.md): seconds per frame of ``matcher.match`` on real-photo frames
 (640x360, one episode's target prepared once) for the default ``effnet``, the default
-``verify`` and ``verify`` without its keypoint signal (no ``xfeat`` on the candidates),
-interleaved, the fastest of the repeats; the ratio verify / effnet. Target: at most 2.
+``verify``, ``verify`` with its keypoint signal on (``xfeat`` on every candidate), the
+carried ``fusion`` (three EfficientNet passes and ``color``) and ``color``, interleaved, the
+fastest of the repeats; each as a multiple of ``effnet``. Target: verify at most 2x.
 
 ``python -m benchmarks.bench_verify [--quick]``.
 """
@@ -15,17 +16,17 @@ from pathlib import Path
 from benchmarks.framesets import real_photos
 from benchmarks.timing import fastest
 from pin_match import create_matcher
+from pin_match.matchers.verify import SIGNALS
 from pin_match.training.verifier import fit_verifier
 
 TARGET_RATIO = 2.0
-NO_KEYPOINTS = ("proto", "margin", "desc", "cycle", "color")
 
 
-def no_keypoints_file(fs, folder: Path) -> str:
-    """A verifier file for the signals without keypoints, fitted on the real-photo set: only its cost is read here."""
-    path = folder / "verify_no_keypoints.json"
+def keypoints_file(fs, folder: Path) -> str:
+    """A verifier file for all signals, keypoints included, fitted on the real-photo set: only its cost is read."""
+    path = folder / "verify_keypoints.json"
     if not path.exists():
-        fit_verifier([fs], path, split="val", overrides={"signals": NO_KEYPOINTS}, out=folder)
+        fit_verifier([fs], path, split="val", overrides={"signals": SIGNALS}, out=folder)
     return str(path)
 
 
@@ -33,8 +34,8 @@ def run(quick: bool = False) -> dict:
     fs = real_photos()
     folder = fs.root.parent / "verify_bench"
     matchers = {"effnet": create_matcher("effnet"), "verify": create_matcher("verify"),
-                "verify without keypoints": create_matcher("verify", signals=NO_KEYPOINTS,
-                                                           weights=no_keypoints_file(fs, folder))}
+                "verify with keypoints": create_matcher("verify", signals=SIGNALS, weights=keypoints_file(fs, folder)),
+                "fusion": create_matcher("fusion"), "color": create_matcher("color")}
     episode = fs.episodes.iloc[0]
     target = fs.target(episode.target_object_id)
     images = [fs.image(f) for f in fs.frames.frame_id[fs.frames.episode_id == episode.episode_id]]

@@ -19,7 +19,8 @@ with the references'. This matcher does that with the default ``effnet``:
    ``cycle`` the mutual cell matches between candidate and view, weighted by cosine, over the
    view's cells (``effnet-parts``' mutual rule); ``color`` the Bhattacharyya overlap of the
    candidate's foreground HSV histogram with the references' masked one; ``keypoints``
-   log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop.
+   log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop,
+   off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
    split by ``pin_match.training.verifier.fit_verifier``; its content is hashed into the id):
    each candidate's score is the fitted probability that it is the target, the frame's is its
@@ -63,6 +64,9 @@ from pin_match.matchers.patch import PatchSimilarityMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
 
 SIGNALS = ("proto", "margin", "desc", "cycle", "color", "keypoints")
+# keypoints on every candidate cost 0.4x effnet a frame and pushed verify past 2x effnet's cost (docs/performance.md):
+# off by default, on with --cfg signals=... and a verifier file fitted for them
+DEFAULT_SIGNALS = ("proto", "margin", "desc", "cycle", "color")
 VERIFIER_FORMAT = "pin-match-verifier"
 VERIFIER_VERSION = 1
 # a candidate crop is a few hundred pixels: half the keypoints of a whole frame cover it
@@ -80,7 +84,8 @@ class VerifyConfig(MatcherConfig):
     zoom_size: int = field(default=256, metadata={"help": "input side at which candidates and views are embedded"})
     keypoints: str = field(default="xfeat", metadata={"help": "keypoint matcher run on each candidate crop"})
     keypoints_cfg: dict[str, Any] = part_cfg_field("keypoints")
-    signals: tuple[str, ...] = field(default=SIGNALS, metadata={"help": f"signals used, of {', '.join(SIGNALS)}"})
+    signals: tuple[str, ...] = field(default=DEFAULT_SIGNALS, metadata={
+        "help": f"signals used, of {', '.join(SIGNALS)} (keypoints off by default: its cost)"})
     candidates: int = field(default=3, metadata={"help": "candidate regions verified per frame"})
     region_drop: float = field(default=0.1, metadata={"help": "a region holds the cells within this of its peak"})
     pad: float = field(default=0.15, metadata={"help": "share of a candidate box added on each side"})

@@ -181,11 +181,12 @@ def test_build_errors_name_the_problem(tmp_path):
 
 
 # ------------------------------------------------------------------ the set shipped with pin_match
-# Measured on the shipped set (all 26 episodes, default effnet: layer head, 448 px): AUROC target vs same-category
-# look-alike 0.739, target vs every other frame 0.807 (docs/real-matchers.md; blocks.3 at 224 px: see there). The floors
-# leave room for library versions (resizing, padding) and still need real recognition (chance is 0.5).
-MIN_LOOKALIKE_AUROC_SAME = 0.65
-MIN_LOOKALIKE_AUROC_ALL = 0.72
+# Measured on the shipped set as repaired in 0.1.0 (pasted, all 13 episodes, default effnet: layer head, 448 px): AUROC
+# target vs same-category look-alike 0.658, target vs every other frame 0.758 (docs/real-matchers.md). With 13 target
+# frames one frame moves these by several points: the floors leave that room and still need real recognition (chance
+# is 0.5).
+MIN_LOOKALIKE_AUROC_SAME = 0.60
+MIN_LOOKALIKE_AUROC_ALL = 0.70
 
 
 @pytest.fixture(scope="module")

@@ -31,13 +31,13 @@ from pin_match.evaluation.metrics import auroc, detection_metrics, frame_arrays,
 from pin_match.evaluation.paired import paired_comparison
 from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, choose_sigma
-from pin_match.matchers.verify import SIGNALS, verdict
+from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, verdict
 from pin_match.training.verifier import candidate_table, fit_verifier, frame_scores
 
 
 def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, tuple[str, ...]]:
-    """The ablation's rows: all signals, each alone, each left out."""
-    sets = {"all": tuple(signals)}
+    """The ablation's rows: the default signals, all, each alone, each left out of all."""
+    sets = {"default": DEFAULT_SIGNALS, "all": tuple(signals)}
     sets.update({f"{s} alone": (s,) for s in signals})
     sets.update({f"without {s}": tuple(x for x in signals if x != s) for s in signals})
     return sets
@@ -115,8 +115,8 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
     for set_name, fs in eval_sets.items():
         split = "val" if set_name in {Path(p).name for p in train} else None
         a = scored(fs, effnet_scores(tables[set_name]), split)
-        b = scored(fs, frame_scores(tables[set_name], specs["all"]), split)
-        diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify all"], names=("effnet", "verify"),
+        b = scored(fs, frame_scores(tables[set_name], specs["default"]), split)
+        diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify default"], names=("effnet", "verify"),
                                  n_boot=n_boot).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
                                 high=float(diff["CI high"]))
@@ -167,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
                    help="frame-sets read, PATH or PATH:SPLIT (a development set: its val split)")
     p.add_argument("--features", default=str(outputs.FEATURES), help="cache of candidate signals")
     p.add_argument("--json", help="write the whole report here")
-    p.add_argument("--figure", help="draw the first --eval set's decisions of the whole verifier into this PNG")
+    p.add_argument("--figure", help="draw the first --eval set's decisions of the default verifier into this PNG")
     a = p.parse_args(argv)
     result = report(a.train, a.eval, a.features)
     table = pd.DataFrame(result["rows"])
@@ -180,7 +180,7 @@ def main(argv: list[str] | None = None) -> int:
         path, _, split = a.eval[0].partition(":")
         fs = FrameSet.load(path).split(split or None)
         table = candidate_table(fs, create_matcher("verify"), out=a.features)
-        print(f"wrote {candidates_figure(fs, table, result['specs']['all'], a.figure)}")
+        print(f"wrote {candidates_figure(fs, table, result['specs']['default'], a.figure)}")
     return 0
 
 
