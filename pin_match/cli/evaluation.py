@@ -194,7 +194,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--matcher", action="append",
                    help="matcher for the synthetic set (repeatable; default color, xfeat)")
     s.add_argument("--lookalike-matcher", action="append",
-                   help="matcher for the real look-alike set (repeatable; default color, effnet)")
+                   help="matcher for the real look-alike set (repeatable; default effnet, verify, color)")
     s.add_argument("--no-lookalikes", action="store_true", help="the synthetic set only")
     s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
     s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")

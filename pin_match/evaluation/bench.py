@@ -34,9 +34,11 @@ from pin_match.scoring.table import ScoreTable
 #   on every frame of both), so it is left out; on the recolour set (realset) it has signal;
 # - effnet's ImageNet features do not recognise the flat renders (AUROC target vs look-alike 0.39 on the synthetic
 #   val split), and at 448 px it costs 0.37 s a frame here, so it is shown on the real look-alikes only, scored on
-#   their val split at its default sigma (tuned on the same set's train instances).
+#   their val split at its default sigma (tuned on the same set's train instances);
+# - verify, the default offline matcher for real photos (docs/instance-matchers.md), is shown beside effnet there, so
+#   the comparison pages put it against effnet (each matcher is compared with the first).
 OFFLINE_MATCHERS = ("color", "xfeat")
-LOOKALIKE_MATCHERS = ("color", "effnet")
+LOOKALIKE_MATCHERS = ("effnet", "verify", "color")
 DEMO_EPISODES = 8
 DEMO_OUT = outputs.DEMO
 REPORT_SPLIT = "val"
