@@ -187,6 +187,9 @@ def test_build_errors_name_the_problem(tmp_path):
 # is 0.5).
 MIN_LOOKALIKE_AUROC_SAME = 0.60
 MIN_LOOKALIKE_AUROC_ALL = 0.70
+# verify, the default offline matcher for real photos, on the same frames: 0.711 / 0.778 (docs/instance-matchers.md)
+MIN_VERIFY_AUROC_SAME = 0.64
+MIN_VERIFY_AUROC_ALL = 0.72
 
 
 @pytest.fixture(scope="module")
@@ -208,12 +211,16 @@ def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_past
         assert rows and all(r["licence"].startswith("CC BY 4.0") and r["source"] for r in rows), table
 
 
-def test_default_effnet_tells_real_instances_from_real_lookalikes(shipped_pasted, tmp_path):
+@pytest.mark.parametrize("name, floor_same, floor_all", [
+    ("effnet", MIN_LOOKALIKE_AUROC_SAME, MIN_LOOKALIKE_AUROC_ALL),
+    ("verify", MIN_VERIFY_AUROC_SAME, MIN_VERIFY_AUROC_ALL)])
+def test_default_matchers_tell_real_instances_from_real_lookalikes(shipped_pasted, tmp_path, name, floor_same,
+                                                                   floor_all):
     from pin_match.evaluation.labels import frame_labels, scored_frames
     from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
     from pin_match.scoring import RunOptions, score
 
-    table = score(shipped_pasted, "effnet", out=tmp_path, run=RunOptions(progress=False))
+    table = score(shipped_pasted, name, out=tmp_path, run=RunOptions(progress=False))
     metrics = ranking_metrics(frame_arrays(scored_frames(frame_labels(shipped_pasted), table)))
-    assert metrics["auroc_same"] > MIN_LOOKALIKE_AUROC_SAME, metrics
-    assert metrics["auroc_target"] > MIN_LOOKALIKE_AUROC_ALL, metrics
+    assert metrics["auroc_same"] > floor_same, metrics
+    assert metrics["auroc_target"] > floor_all, metrics
