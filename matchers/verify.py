@@ -24,8 +24,8 @@ with the references'. This matcher does that with the default ``effnet``:
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
    split by ``pin_match.training.verifier.fit_verifier``; its content is hashed into the id):
    each candidate's score is the fitted probability that it is the target, the frame's is its
-   best candidate's. A probability means the same on every frame-set (as far as the fit
-   carries, docs/instance-matchers.md): default sigma 0.5. Points are the candidates' cells,
+   best candidate's. A probability means one thing on every frame-set, but its level carries only
+   partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
    each with its candidate's score, and the boxes come back with the result.
 """
 
@@ -148,7 +148,9 @@ class VerifyMatcher(CompositeMatcher):
     weights_spec = FusionWeightsSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
                                      distribution="pin-match",
                                      license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
-    default_sigma = 0.5  # probability 1/2 under the fit's class weights
+    # PIN's first-match objective on MyVLM's train instances, both variants (docs/instance-matchers.md); how far this
+    # one sigma carries to other sets is measured there: tune it on frames like the agent's
+    default_sigma = 0.596
     version = 1
     paper = ("detect, then re-identify (CNOS, Nguyen et al., ICCVW 2023; NIDS-Net, Lu et al., 2024) with "
              "cycle-consistent cell matches (Matcher, Liu et al., ICLR 2024) and a colour check (PInVerify, 2026)")

@@ -162,6 +162,7 @@ def test_contract_with_real_weights(tmp_path):
     path = verifier_file(tmp_path / "v.json", matcher.signals_id, {s: 1.0 for s in FAST["signals"]})
     scores = check_matcher("verify", weights=str(path), **FAST)
     assert all(0.0 < s < 1.0 for s in scores.values())
+    assert all(0.0 < s < 1.0 for s in check_matcher("verify").values())  # the default: carried file, offline
 
 
 def test_the_carried_verifier_file_fits_the_default_signals():
