@@ -143,6 +143,9 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
     matcher = create_matcher("verify", weights=str(path), **FAST)
     table = candidate_table(tiny_frameset, matcher, out=tmp_path / "features")  # read from the cache
     assert set(table.frame_id) == set(tiny_frameset.frames.frame_id)
+    val = tiny_frameset.split("val")  # a split reads the whole set's table
+    assert set(candidate_table(val, matcher, out=tmp_path / "features").episode_id) == set(val.episodes.episode_id)
+    assert len(list((tmp_path / "features").rglob("*.parquet"))) == 1
     cached = dict(zip(*frame_scores(table, spec).T.to_numpy()))
     episode = tiny_frameset.episodes.iloc[1]
     matcher.prepare(tiny_frameset.target(episode.target_object_id))

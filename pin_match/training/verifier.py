@@ -49,12 +49,14 @@ def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = o
 
     Cached by the matcher's ``signals_id``: a table holding the signals asked for is read, whatever else it holds.
     """
+    folder = Path(out) / "verify-signals" / matcher.signals_id
     splits = "+".join(sorted(set(fs.episodes.split)))  # a split of a frame-set keeps the whole set's fingerprint
-    cache = Path(out) / "verify-signals" / matcher.signals_id / f"{fs.fingerprint[:16]}_{splits}.parquet"
-    if cache.exists():
-        table = pd.read_parquet(cache)
-        if set(matcher.cfg.signals) <= set(table.columns):
-            return table
+    cache = folder / f"{fs.fingerprint[:16]}_{splits}.parquet"
+    episodes = set(fs.episodes.episode_id)
+    for found in sorted(folder.glob(f"{fs.fingerprint[:16]}_*.parquet")):  # this set, or the whole set it is a split of
+        table = pd.read_parquet(found)
+        if set(matcher.cfg.signals) <= set(table.columns) and episodes <= set(table.episode_id):
+            return table[table.episode_id.isin(episodes)].reset_index(drop=True)
     rows = []
     for n, episode in enumerate(fs.episodes.itertuples(), 1):
         matcher.prepare(fs.target(episode.target_object_id))

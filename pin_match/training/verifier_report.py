@@ -84,7 +84,7 @@ def tuned_sigma(frames: pd.DataFrame) -> float:
 def report(train: Sequence[str], evals: Sequence[str], features: str | Path = outputs.FEATURES,
            n_boot: int = 1000) -> dict:
     """Every signal set and ``effnet`` on every evaluation set (val split where it has one, else all frames)."""
-    train_sets = [FrameSet.load(p) for p in train]
+    train_sets = [FrameSet.load(p).split("train") for p in train]
     eval_sets = {}
     for item in evals:
         path, _, split = item.partition(":")

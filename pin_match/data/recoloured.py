@@ -1,0 +1,68 @@
+"""Recoloured twins of a look-alike source's train instances: look-alikes that only colour tells apart.
+
+Real same-category look-alikes mostly differ in shape and print (MyVLM's toys, figurines and
+pets), so a fusion fitted on them learns to weigh colour little, and fails where look-alikes
+differ by colour, which PIN's colour-heavy descriptions make common (docs/instance-matchers.md).
+A twin is an instance's own photos with the object's hue rotated (pixels under its mask only),
+added to the same category and split, so a fit also sees pairs that only colour separates.
+Objects with little colour (mean saturation under ``min_saturation``) get no twin: rotating a
+grey hue changes nothing, and an identical twin is a look-alike no signal can separate.
+"""
+
+from __future__ import annotations
+
+import shutil
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pin_match import atomic
+from pin_match.data.lookalike_source import (
+    OPTIONAL_PHOTO_COLUMNS,
+    PHOTO_COLUMNS,
+    LookalikeError,
+    read_csv,
+    staged_source,
+    write_csv,
+)
+
+
+def rotate_hue(rgb: np.ndarray, mask: np.ndarray, hue: int) -> np.ndarray:
+    """The photo with the hue of the pixels under ``mask`` rotated by ``hue`` (OpenCV units, 0-179)."""
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    hsv[..., 0] = ((hsv[..., 0].astype(np.int32) + hue) % 180).astype(np.uint8)
+    out = rgb.copy()  # the rest keeps its bytes: an HSV round trip would move it by rounding
+    out[mask] = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[mask]
+    return out
+
+
+def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min_saturation: float = 60.0,
+                         split: str = "train", overwrite: bool = False) -> Path:
+    """A copy of the source folder ``src`` in which every colourful instance of ``split`` has a hue-rotated twin.
+
+    The twin ``<instance>_hue<hue>`` keeps the instance's category, split, masks, source and licence
+    (its photos are derived from the instance's own, which ``source`` says). Returns ``out``.
+    """
+    src, out = Path(src), Path(out)
+    rows = read_csv(src / "photos.csv", PHOTO_COLUMNS)
+    if "split" not in rows[0]:
+        raise LookalikeError(f"{src / 'photos.csv'} has no split column: twins need each photo's split")
+    with staged_source(out, overwrite) as stage:
+        shutil.copytree(src, stage, dirs_exist_ok=True)
+        twins = []
+        for instance in sorted({r["instance_id"] for r in rows if r["split"] == split}):
+            photos = [r for r in rows if r["instance_id"] == instance]
+            images = [(r, cv2.cvtColor(cv2.imread(str(src / r["file"])), cv2.COLOR_BGR2RGB),
+                       cv2.imread(str(src / r["mask"]), cv2.IMREAD_GRAYSCALE) > 127) for r in photos]
+            saturation = np.concatenate([cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)[..., 1][mask] for _, rgb, mask in images])
+            if saturation.mean() < min_saturation:
+                continue
+            for r, rgb, mask in images:
+                twin = f"{r['photo_id']}_hue{hue}"
+                atomic.write_image(stage / "photos" / f"{twin}.png", rotate_hue(rgb, mask, hue))
+                twins.append({**r, "photo_id": twin, "instance_id": f"{instance}_hue{hue}",
+                              "file": f"photos/{twin}.png",
+                              "source": f"{r['source']} (hue rotated by {hue} under the mask by pin_match)"})
+        write_csv(stage / "photos.csv", [*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS], rows + twins)
+    return out
