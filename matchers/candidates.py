@@ -23,8 +23,7 @@ class Candidate:
 
     box: tuple[int, int, int, int]
     peak: float
-    points: np.ndarray        # (K, 2) centres of the region's cells, frame pixels
-    point_scores: np.ndarray  # (K,) their patch scores
+    points: np.ndarray  # (K, 2) centres of the region's cells, frame pixels
 
 
 def region_cells(scores: np.ndarray, row: int, col: int, drop: float) -> np.ndarray:
@@ -78,7 +77,7 @@ def locate(maps: np.ndarray, crops: list[Crop], frame_shape: tuple[int, int], *,
                          aspect, pad, 2 * max(cell_w, cell_h), width, height)
         points = np.stack([crop.x0 + (cols + 0.5) * cell_w, crop.y0 + (rows + 0.5) * cell_h], 1)
         points = np.minimum(np.rint(points), [width - 1, height - 1]).astype(np.float32)
-        found.append(Candidate(box, float(maps[c, row, col]), points, maps[c][region].astype(np.float32)))
+        found.append(Candidate(box, float(maps[c, row, col]), points))
         if len(found) == count:
             break
     return found

@@ -47,7 +47,7 @@ TRANSFORMS = {"identity": lambda s: s, "log1p": lambda s: math.log1p(max(s, 0.0)
 
 @dataclass(frozen=True)
 class FusionWeightsSpec(WeightsSpec):
-    """The fusion file: the user's, else the one fitted on the look-alike frame-sets, shipped beside this module.
+    """A fitted JSON file (a fusion's or a verifier's): the user's, else the one shipped beside these modules.
 
     Its identity is the file's content even for the shipped one: a refitted file is new weights within one version.
     """
@@ -58,14 +58,20 @@ class FusionWeightsSpec(WeightsSpec):
         return {"file_sha256": content_digest(str(self.resolve(None).resolve()))}
 
 
-def read_fusion(path: Path) -> dict[str, Any]:
-    """The fusion file, checked: every problem is a WeightsError naming the file."""
+def read_fitted_file(path: Path, kind: str, fmt: str, version: int) -> dict[str, Any]:
+    """A fitted JSON file of format ``fmt`` and ``version``: a WeightsError naming the ``kind`` file otherwise."""
     try:
         spec = json.loads(path.read_text())
     except (OSError, ValueError) as exc:
-        raise WeightsError(f"fusion file {path}: cannot read it as JSON ({exc})") from exc
-    if not isinstance(spec, dict) or spec.get("format") != FUSION_FORMAT or spec.get("version") != FUSION_VERSION:
-        raise WeightsError(f"fusion file {path}: not a {FUSION_FORMAT} file of version {FUSION_VERSION}")
+        raise WeightsError(f"{kind} file {path}: cannot read it as JSON ({exc})") from exc
+    if not isinstance(spec, dict) or spec.get("format") != fmt or spec.get("version") != version:
+        raise WeightsError(f"{kind} file {path}: not a {fmt} file of version {version}")
+    return spec
+
+
+def read_fusion(path: Path) -> dict[str, Any]:
+    """The fusion file, checked: every problem is a WeightsError naming the file."""
+    spec = read_fitted_file(path, "fusion", FUSION_FORMAT, FUSION_VERSION)
     components = spec.get("components")
     if not isinstance(components, list) or not components:
         raise WeightsError(f"fusion file {path}: 'components' must be a non-empty list")

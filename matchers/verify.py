@@ -58,7 +58,7 @@ from pin_match.contract import (
 )
 from pin_match.matchers.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
 from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
-from pin_match.matchers.fusion import FusionWeightsSpec
+from pin_match.matchers.fusion import FusionWeightsSpec, read_fitted_file
 from pin_match.matchers.parts import part_matches, reference_cells
 from pin_match.matchers.patch import PatchSimilarityMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
@@ -72,6 +72,7 @@ VERIFIER_VERSION = 1
 # a candidate crop is a few hundred pixels: half the keypoints of a whole frame cover it
 KEYPOINT_DEFAULTS = {"crops": "whole", "max_keypoints": 256}
 REFERENCE_PAD = 0.1  # a reference view is cut to its mask's box plus this share per side, as a candidate is padded
+ZOOM_SIGNALS = ("desc", "cycle", "color")  # the signals that need the candidate embedded again
 
 
 @dataclass
@@ -118,12 +119,7 @@ class Reference:
 
 def read_verifier(path: Path) -> dict[str, Any]:
     """The verifier file, checked: every problem is a WeightsError naming the file."""
-    try:
-        spec = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise WeightsError(f"verifier file {path}: cannot read it as JSON ({exc})") from exc
-    if not isinstance(spec, dict) or spec.get("format") != VERIFIER_FORMAT or spec.get("version") != VERIFIER_VERSION:
-        raise WeightsError(f"verifier file {path}: not a {VERIFIER_FORMAT} file of version {VERIFIER_VERSION}")
+    spec = read_fitted_file(path, "verifier", VERIFIER_FORMAT, VERIFIER_VERSION)
     coefs = spec.get("coefs")
     numbers = [*coefs.values(), spec.get("intercept")] if isinstance(coefs, dict) else []
     if not numbers[:-1] or set(coefs) - set(SIGNALS) \
@@ -237,7 +233,8 @@ class VerifyMatcher(CompositeMatcher):
                            aspect=ref.aspect, pad=cfg.pad)
             per_image.append(found)
             crops += [np.ascontiguousarray(image[c.box[1]:c.box[3], c.box[0]:c.box[2]]) for c in found]
-        feats = self.zoomer.backbone.encode(crops).patches
+        zoom = set(ZOOM_SIGNALS) & set(cfg.signals)  # none of them: no second pass (proto and margin cost effnet's)
+        feats = self.zoomer.backbone.encode(crops).patches if zoom else None
         matches = [r.score for r in self.keypointer.match_batch(crops)] if "keypoints" in cfg.signals \
             else [0.0] * len(crops)
         out, k = [], 0
@@ -246,7 +243,7 @@ class VerifyMatcher(CompositeMatcher):
             rows = []
             for i, cand in enumerate(found):
                 others = peaks[:i] + peaks[i + 1:]
-                signals = self._zoom_signals(crops[k], feats[k])
+                signals = self._zoom_signals(crops[k], feats[k]) if zoom else {}
                 signals.update(proto=cand.peak, margin=cand.peak - max(others) if others else 0.0,
                                keypoints=math.log1p(max(float(matches[k]), 0.0)))
                 rows.append((cand, {s: signals[s] for s in cfg.signals}))

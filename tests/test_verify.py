@@ -160,6 +160,21 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
     assert x0 <= 148 <= x1 and y0 <= 348 <= y1
 
 
+def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
+    matcher = create_matcher("verify", signals=("proto", "margin"))
+    path = verifier_file(tmp_path / "v.json", matcher.signals_id, {"proto": 4.0, "margin": 1.0}, intercept=-2.0)
+    matcher = create_matcher("verify", signals=("proto", "margin"), weights=str(path))
+    episode = tiny_frameset.episodes.iloc[0]
+    matcher.prepare(tiny_frameset.target(episode.target_object_id))
+    zoom_passes = []
+    matcher.zoomer.backbone.encode = lambda crops: zoom_passes.append(len(crops))
+    effnet = create_matcher("effnet")
+    effnet.prepare(tiny_frameset.target(episode.target_object_id))
+    image = tiny_frameset.image(tiny_frameset.frames.frame_id.iloc[0])
+    (rows,) = matcher.candidate_signals([image])
+    assert zoom_passes == [] and rows[0][1]["proto"] == pytest.approx(effnet.match(image).score, abs=1e-6)
+
+
 def test_contract_with_real_weights(tmp_path):
     matcher = create_matcher("verify", **FAST)
     path = verifier_file(tmp_path / "v.json", matcher.signals_id, {s: 1.0 for s in FAST["signals"]})
