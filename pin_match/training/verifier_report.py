@@ -43,11 +43,14 @@ def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, tuple[str, ...]]:
     return sets
 
 
-def scored(fs: FrameSet, scores: pd.DataFrame, split: str | None) -> pd.DataFrame:
-    """Labels of the split's frames with their score."""
+def split_labels(fs: FrameSet, split: str | None) -> pd.DataFrame:
+    """``frame_labels`` of the split's frames (all of them for None): built once per set, scored many times."""
     labels = frame_labels(fs)
-    if split is not None:
-        labels = labels[labels.split == split]
+    return labels if split is None else labels[labels.split == split]
+
+
+def scored(labels: pd.DataFrame, scores: pd.DataFrame) -> pd.DataFrame:
+    """The labelled frames with their score."""
     return labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
 
 
@@ -98,24 +101,26 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
                  for label, s in signal_sets().items()}
     scorers = {"effnet": effnet_scores, **{f"verify {label}": (lambda t, s=spec: frame_scores(t, s))
                                            for label, spec in specs.items()}}
+    dev_names = [Path(p).name for p in train]
+    dev_labels = [split_labels(fs, "train") for fs in train_sets]
+    eval_labels = {name: split_labels(fs, "val" if name in dev_names else None) for name, fs in eval_sets.items()}
     for name, score_of in scorers.items():
-        dev = pd.concat([scored(fs, score_of(tables[Path(p).name]), "train").assign(  # variants share ids
+        dev = pd.concat([scored(labels, score_of(tables[set_name])).assign(  # variants share ids
             frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
-            for i, (p, fs) in enumerate(zip(train, train_sets))])
+            for i, (set_name, labels) in enumerate(zip(dev_names, dev_labels))])
         sigmas[name] = tuned_sigma(dev)
-        for set_name, fs in eval_sets.items():
-            split = "val" if set_name in {Path(p).name for p in train} else None
-            frames = scored(fs, score_of(tables[set_name]), split)
+        for set_name, labels in eval_labels.items():
+            frames = scored(labels, score_of(tables[set_name]))
+            arrays = frame_arrays(frames)
             value, low, high = auroc_same_interval(frames, n_boot)
-            at = detection_metrics(frame_arrays(frames), sigmas[name])
+            at = detection_metrics(arrays, sigmas[name])
             rows.append(dict(matcher=name, set=set_name, auroc_same=value, low=low, high=high,
-                             auroc=ranking_metrics(frame_arrays(frames))["auroc_target"], sigma=sigmas[name],
+                             auroc=ranking_metrics(arrays)["auroc_target"], sigma=sigmas[name],
                              tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"]))
     paired = {}
-    for set_name, fs in eval_sets.items():
-        split = "val" if set_name in {Path(p).name for p in train} else None
-        a = scored(fs, effnet_scores(tables[set_name]), split)
-        b = scored(fs, frame_scores(tables[set_name], specs["default"]), split)
+    for set_name, labels in eval_labels.items():
+        a = scored(labels, effnet_scores(tables[set_name]))
+        b = scored(labels, frame_scores(tables[set_name], specs["default"]))
         diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify default"], names=("effnet", "verify"),
                                  n_boot=n_boot).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
@@ -132,7 +137,7 @@ def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str |
 
     from pin_match.evaluation.gallery import draw_frame, on_checkerboard, thumbnail
 
-    frames = scored(fs, frame_scores(table, spec), None)
+    frames = scored(frame_labels(fs), frame_scores(table, spec))
     same = frames[frames.same_visible & ~frames.target_visible].nlargest(per_row, "score")
     target = frames[frames.target_visible].nsmallest(per_row, "score")
     fig, axes = plt.subplots(2, per_row, figsize=(2.2 * per_row, 8.4), squeeze=False)
