@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
+from pin_match.data.compose import rotate_hue
 from pin_match.data.lookalike_source import (
     OPTIONAL_PHOTO_COLUMNS,
     PHOTO_COLUMNS,
@@ -14,14 +15,14 @@ from pin_match.data.lookalike_source import (
     load_photos,
     write_csv,
 )
-from pin_match.data.recoloured import add_recoloured_twins, rotate_hue
+from pin_match.data.recoloured import add_recoloured_twins
 
 
 def test_rotate_hue_moves_masked_pixels_only():
     rgb = np.zeros((2, 2, 3), np.uint8)
     rgb[...] = (255, 0, 0)  # pure red: OpenCV hue 0
     mask = np.array([[True, False], [False, False]])
-    out = rotate_hue(rgb, mask, 60)  # 120 degrees: green
+    out = rotate_hue(rgb, 60, mask)  # 120 degrees: green
     assert out[0, 0].tolist() == [0, 255, 0]
     assert (out[~mask] == (255, 0, 0)).all()
 

@@ -32,6 +32,21 @@ def scale_brightness(image: np.ndarray, gain: float | Sequence[float]) -> np.nda
     return rgb if image.shape[-1] == 3 else np.dstack([rgb, image[..., 3]])
 
 
+def rotate_hue(rgb: np.ndarray, hue: int, mask: np.ndarray | None = None) -> np.ndarray:
+    """An RGB uint8 image with its hue rotated by ``hue`` (OpenCV units, 0-179); only under ``mask`` when given.
+
+    Pixels outside the mask keep their bytes: an HSV round trip would move them by rounding.
+    """
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
+    hsv[..., 0] = ((hsv[..., 0].astype(np.int32) + hue) % 180).astype(np.uint8)
+    rotated = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+    if mask is None:
+        return rotated
+    out = rgb.copy()
+    out[mask] = rotated[mask]
+    return out
+
+
 def largest_piece(mask: np.ndarray) -> np.ndarray:
     """The largest 8-connected piece of a 0/1 uint8 mask (all zero when the mask is).
 

@@ -24,7 +24,15 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, paste, room_crop, scale_brightness, stable_seed
+from pin_match.data.compose import (
+    FRAME_HEIGHT,
+    FRAME_WIDTH,
+    paste,
+    room_crop,
+    rotate_hue,
+    scale_brightness,
+    stable_seed,
+)
 from pin_match.data.frameset import FrameSet
 from pin_match.data.realset_photos import BACKGROUNDS, RealSetError, cutout_rgba
 from pin_match.data.writer import FrameSetWriter
@@ -96,9 +104,7 @@ def recolour(rgba: np.ndarray, hue: int = 0, tint: tuple[float, float, float] | 
     """A recoloured copy: hue rotated by ``hue`` (OpenCV units) and/or RGB gains; alpha unchanged."""
     rgb = rgba[..., :3]
     if hue:
-        hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
-        hsv[..., 0] = ((hsv[..., 0].astype(np.int32) + hue) % 180).astype(np.uint8)
-        rgb = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)
+        rgb = rotate_hue(rgb, hue)
     if tint is not None:
         rgb = scale_brightness(rgb, tint)
     return np.dstack([rgb, rgba[..., 3]])

@@ -18,6 +18,7 @@ import cv2
 import numpy as np
 
 from pin_match import atomic
+from pin_match.data.compose import rotate_hue
 from pin_match.data.lookalike_source import (
     OPTIONAL_PHOTO_COLUMNS,
     PHOTO_COLUMNS,
@@ -26,15 +27,6 @@ from pin_match.data.lookalike_source import (
     staged_source,
     write_csv,
 )
-
-
-def rotate_hue(rgb: np.ndarray, mask: np.ndarray, hue: int) -> np.ndarray:
-    """The photo with the hue of the pixels under ``mask`` rotated by ``hue`` (OpenCV units, 0-179)."""
-    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
-    hsv[..., 0] = ((hsv[..., 0].astype(np.int32) + hue) % 180).astype(np.uint8)
-    out = rgb.copy()  # the rest keeps its bytes: an HSV round trip would move it by rounding
-    out[mask] = cv2.cvtColor(hsv, cv2.COLOR_HSV2RGB)[mask]
-    return out
 
 
 def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min_saturation: float = 60.0,
@@ -60,7 +52,7 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
                 continue
             for r, rgb, mask in images:
                 twin = f"{r['photo_id']}_hue{hue}"
-                atomic.write_image(stage / "photos" / f"{twin}.png", rotate_hue(rgb, mask, hue))
+                atomic.write_image(stage / "photos" / f"{twin}.png", rotate_hue(rgb, hue, mask))
                 twins.append({**r, "photo_id": twin, "instance_id": f"{instance}_hue{hue}",
                               "file": f"photos/{twin}.png",
                               "source": f"{r['source']} (hue rotated by {hue} under the mask by pin_match)"})
