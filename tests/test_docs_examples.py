@@ -1,11 +1,15 @@
-"""The code in docs/adding-a-matcher.md runs as printed: a newcomer's first matcher passes the contract."""
+"""The matchers the docs show run as printed: a newcomer's first matcher and the example file pass the contract."""
 
 from __future__ import annotations
 
 import re
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
-DOC = Path(__file__).parents[1] / "docs" / "adding-a-matcher.md"
+from pin_match.contract import check_matcher, create_matcher, list_matchers, registry
+
+ROOT = Path(__file__).parents[1]
+DOC = ROOT / "docs" / "adding-a-matcher.md"
 
 
 def test_shortest_matcher_in_the_docs_passes_the_contract():
@@ -13,6 +17,17 @@ def test_shortest_matcher_in_the_docs_passes_the_contract():
     assert len(blocks) >= 2
     namespace: dict = {}
     exec(compile("\n".join(blocks[:2]), str(DOC), "exec"), namespace)  # the second block calls check_matcher
-    from pin_match.contract.registry import create_matcher
-
     assert create_matcher("my-matcher").id.startswith("my-matcher@")
+
+
+def test_the_example_file_works_as_a_plug_in_and_is_no_built_in(monkeypatch):
+    """examples/my_matcher.py, declared as a third-party package would (an entry point), passes the contract."""
+    assert "example-mean-color" not in registry.builtin_modules()
+    monkeypatch.syspath_prepend(str(ROOT / "examples"))
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # the name is gone after this test
+    ep = EntryPoint(name="example-mean-color", value="my_matcher:MeanColorMatcher", group=registry.ENTRY_POINT_GROUP)
+    monkeypatch.setattr(registry, "_entry_points", lambda: {ep.name: ep})
+    assert "example-mean-color" in list_matchers("example-*")
+    scores = check_matcher("example-mean-color")
+    assert all(0.0 <= s <= 1.0 for s in scores.values())  # one minus a colour distance scaled by its maximum
+    assert create_matcher("example-mean-color", grid=4).cfg.grid == 4

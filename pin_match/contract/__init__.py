@@ -26,6 +26,7 @@ from pin_match.contract.matcher import (
 )
 from pin_match.contract.registry import (
     ENTRY_POINT_GROUP,
+    RegistrationError,
     UnknownMatcherError,
     available_names,
     build_config,
@@ -50,9 +51,9 @@ from pin_match.errors import PinMatchError
 
 __all__ = [
     "ENTRY_POINT_GROUP", "N_DESCRIPTIONS", "N_VIEWS", "POLICIES", "ConfigError", "ContractError", "Crop", "CropConfig",
-    "CropMatcher", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError", "Target",
-    "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec", "available_names", "build_config",
-    "check_matcher", "content_digest", "create_matcher", "crop_boxes", "crops_field", "get_matcher_class",
-    "list_matchers", "load_torch_state", "merge_crop_results", "misfit", "parse_overrides", "points_above",
-    "read_state_dict", "register_matcher", "resolve_all", "weights_field", "with_weights",
+    "CropMatcher", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError",
+    "RegistrationError", "Target", "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec",
+    "available_names", "build_config", "check_matcher", "content_digest", "create_matcher", "crop_boxes", "crops_field",
+    "get_matcher_class", "list_matchers", "load_torch_state", "merge_crop_results", "misfit", "parse_overrides",
+    "points_above", "read_state_dict", "register_matcher", "resolve_all", "weights_field", "with_weights",
 ]

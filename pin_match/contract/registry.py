@@ -1,30 +1,29 @@
 """Find matchers by name: built-ins, anything decorated in a loaded module, and entry points.
 
 A built-in is found by reading the ``@register_matcher("name")`` decorators in the files of
-the built-in package, without importing them: listing names stays cheap (no torch), and a
-name never fails because its module was not imported yet. Heavy libraries load only when
-such a matcher is asked for. Third-party packages add matchers through the
-``pin_match.matchers`` entry-point group.
+the built-in package, without importing them (``contract.scan``): listing names stays cheap
+(no torch), and a name never fails because its module was not imported yet. Heavy libraries
+load only when such a matcher is asked for. Third-party packages add matchers through the
+``pin_match.matchers`` entry-point group. A name belongs to one class: a second class
+claiming it (a plug-in taking a built-in's name, two entry points, two decorated modules) is
+refused, naming both, instead of the last one silently winning.
 """
 
 from __future__ import annotations
 
-import ast
 import dataclasses
 import difflib
 import fnmatch
-import functools
 import importlib
-import importlib.util
 import json
 import types
 import typing
 from collections.abc import Callable
-from importlib.metadata import entry_points
-from pathlib import Path
+from importlib.metadata import EntryPoint, entry_points
 from typing import Any
 
 from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, class_problems
+from pin_match.contract.scan import Registration, RegistrationError, scan_package
 from pin_match.errors import PinMatchError
 
 ENTRY_POINT_GROUP = "pin_match.matchers"
@@ -41,7 +40,7 @@ class UnknownMatcherError(PinMatchError, KeyError):
         return str(self.args[0])
 
 
-def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Matcher]], type[Matcher]]:
+def register_matcher(name: str) -> Callable[[type[Matcher]], type[Matcher]]:
     """Class decorator: ``@register_matcher("sift")`` makes the class reachable by name."""
 
     def deco(cls: type[Matcher]) -> type[Matcher]:
@@ -51,57 +50,68 @@ def register_matcher(name: str, *, overwrite: bool = False) -> Callable[[type[Ma
         if problems:
             raise ConfigError(f"matcher {name!r} ({cls.__module__}.{cls.__qualname__}) does not fit the matcher "
                               f"contract: {'; '.join(problems)}")
-        existing = _REGISTRY.get(name)
-        if existing is not None and existing is not cls and not overwrite and \
-                existing.__qualname__ != cls.__qualname__:
-            raise ConfigError(f"matcher name {name!r} is already registered by {existing.__module__}")
+        _refuse_second_claim(name, _dotted(cls))
         if "name" not in vars(cls):
             # the first name a class is registered under is its own (ids and caches carry it);
             # later names (an entry point's, an alias) only point at it and never rename it
             cls.name = name
-        _REGISTRY[name] = cls
+        _REGISTRY[name] = cls  # the same class again (its module imported anew) replaces itself
         return cls
 
     return deco
 
 
+def _dotted(obj: Any) -> str:
+    return f"{obj.__module__}.{obj.__qualname__}"
+
+
+def _owner(name: str) -> str | None:
+    """The class that holds the name: the registered one, else the built-in whose file declares it."""
+    if name in _REGISTRY:
+        return _dotted(_REGISTRY[name])
+    builtin = builtin_registrations().get(name)
+    return builtin.dotted if builtin is not None else None
+
+
+def _refuse_second_claim(name: str, claimant: str) -> None:
+    owner = _owner(name)
+    if owner is not None and owner != claimant:
+        raise RegistrationError(f"matcher name {name!r} is already registered by {owner}; {claimant} needs "
+                                f"another name")
+
+
+def builtin_registrations() -> dict[str, Registration]:
+    """Registered name -> class, file and line of every built-in matcher."""
+    return scan_package(BUILTIN_PACKAGE)
+
+
 def builtin_modules() -> dict[str, str]:
     """Registered name -> module of every built-in matcher."""
-    return modules_registering(BUILTIN_PACKAGE)
+    return {name: registration.module for name, registration in builtin_registrations().items()}
 
 
-@functools.cache
-def modules_registering(package: str) -> dict[str, str]:
-    """Registered name -> module of every ``@register_matcher("name")`` in the package's own files."""
-    spec = importlib.util.find_spec(package)
-    if spec is None or not spec.submodule_search_locations:
-        return {}
-    found = {}
-    for folder in spec.submodule_search_locations:
-        for path in sorted(Path(folder).glob("*.py")):
-            text = path.read_text(encoding="utf-8")
-            if "register_matcher" in text:
-                found.update(dict.fromkeys(_decorated_names(text, str(path)), f"{package}.{path.stem}"))
+def _entry_points() -> dict[str, EntryPoint]:
+    found: dict[str, EntryPoint] = {}
+    for ep in entry_points(group=ENTRY_POINT_GROUP):
+        if ep.name in found and found[ep.name].value != ep.value:
+            raise RegistrationError(f"matcher name {ep.name!r} is declared by two entry points, "
+                                    f"{found[ep.name].value} and {ep.value}; uninstall one of their packages")
+        found[ep.name] = ep
     return found
 
 
-def _decorated_names(source: str, filename: str) -> list[str]:
-    names = []
-    for node in ast.walk(ast.parse(source, filename)):
-        if isinstance(node, ast.ClassDef):
-            for deco in node.decorator_list:
-                if isinstance(deco, ast.Call) and getattr(deco.func, "id", getattr(deco.func, "attr", None)) == \
-                        "register_matcher" and deco.args and isinstance(deco.args[0], ast.Constant):
-                    names.append(deco.args[0].value)
-    return names
-
-
-def _entry_points() -> dict[str, Any]:
-    return {ep.name: ep for ep in entry_points(group=ENTRY_POINT_GROUP)}
+def _check_entry_point(name: str, ep: EntryPoint) -> None:
+    """Refuse an entry point whose name another class holds (it would be ignored without a word)."""
+    owner = _owner(name)
+    if owner is not None and owner != f"{ep.module}.{ep.attr}":
+        _refuse_second_claim(name, _dotted(ep.load()))  # a re-exported class is the same class: load to know
 
 
 def available_names() -> list[str]:
-    return sorted(set(builtin_modules()) | set(_REGISTRY) | set(_entry_points()))
+    plugins = _entry_points()
+    for name, ep in plugins.items():
+        _check_entry_point(name, ep)
+    return sorted(set(builtin_modules()) | set(_REGISTRY) | set(plugins))
 
 
 def list_matchers(pattern: str = "*") -> list[str]:
@@ -111,15 +121,16 @@ def list_matchers(pattern: str = "*") -> list[str]:
 
 def get_matcher_class(name: str) -> type[Matcher]:
     if name not in _REGISTRY:
+        ep = _entry_points().get(name)
+        if ep is not None:
+            _check_entry_point(name, ep)
         builtins = builtin_modules()
         if name in builtins:
             importlib.import_module(builtins[name])
-        else:
-            ep = _entry_points().get(name)
-            if ep is not None:
-                cls = ep.load()
-                if name not in _REGISTRY:  # an entry point may name a class that is not decorated
-                    register_matcher(name)(cls)
+        elif ep is not None:
+            cls = ep.load()
+            if name not in _REGISTRY:  # an entry point may name a class that is not decorated
+                register_matcher(name)(cls)
     if name not in _REGISTRY:
         close = difflib.get_close_matches(name, available_names(), n=3, cutoff=0.5)
         hint = f"; did you mean {', '.join(close)}?" if close else f"; known: {', '.join(available_names())}"

@@ -1,6 +1,6 @@
-"""TEMPLATE: copy this file to add a matcher in one file. See docs/adding-a-matcher.md.
+"""A complete matcher in one file, to copy. See docs/adding-a-matcher.md.
 
-    cp matchers/TEMPLATE.py my_package/my_matcher.py
+    cp examples/my_matcher.py my_package/my_matcher.py
 
 then rename the class and the registry name, fill in ``_prepare`` and ``_match_crops`` and
 register it: either import the module before ``create_matcher("my-matcher")``, or declare
@@ -9,10 +9,11 @@ an entry point so pin_match finds it on its own::
     [project.entry-points."pin_match.matchers"]
     my-matcher = "my_package.my_matcher:MyMatcher"
 
-This template is a working matcher: the mean colour of the target against the mean
-colour of image patches. It is registered under "template-mean-color" only when this
-file is imported, so it never appears in a normal ``pin-match list``. Test yours with
-``pin_match.contract.testing.check_matcher("my-matcher")``.
+This example is a working matcher: the mean colour of the target against the mean colour
+of image patches, registered under "example-mean-color" when the file is imported. It
+lives outside the built-in package, so ``pin-match list`` never shows it;
+tests/test_docs_examples.py loads it as a plug-in through an entry point. Test yours with
+``pin_match.contract.check_matcher("my-matcher")``.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ class MeanColorConfig(CropConfig):
     grid: int = 8  # patches per crop side
 
 
-@register_matcher("template-mean-color")
+@register_matcher("example-mean-color")
 class MeanColorMatcher(CropMatcher):
     """Why this matcher exists (say it here): a minimal, complete example of the interface."""
 
