@@ -123,9 +123,9 @@ def test_no_import_cycle_between_modules():
             pytest.fail("import cycle: " + " -> ".join(cycle))
 
 
-def test_plugins_and_the_template_import_only_the_contract():
-    for name in ("TEMPLATE.py", "classic.py"):
-        found = {m for m in imports_of(ROOT / "matchers" / name) if m.startswith("pin_match")}
+def test_plugins_and_the_example_import_only_the_contract():
+    for path in (ROOT / "examples" / "my_matcher.py", ROOT / "matchers" / "classic.py"):
+        found = {m for m in imports_of(path) if m.startswith("pin_match")}
         assert found and all(m == "pin_match.contract" or m.startswith("pin_match.contract.") for m in found), found
 
 
@@ -164,7 +164,7 @@ def test_every_built_in_but_the_composites_has_its_id_held():
     from pin_match.contract.registry import builtin_modules
 
     held = {n.partition("[")[0] for n in IDS} | COMPOSITES
-    assert set(builtin_modules()) - held <= {"template-mean-color"}
+    assert set(builtin_modules()) <= held
 
 
 def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
@@ -200,7 +200,8 @@ def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path)
     for init in (ROOT / "pin_match").rglob("__init__.py"):
         package = init.parent.relative_to(ROOT)
         assert init.relative_to(ROOT).as_posix() in names, f"add {package} to pyproject's packages"
-    assert "pin_match/matchers/TEMPLATE.py" in names and not any(n.startswith("matchers/") for n in names)
+    assert "pin_match/matchers/__init__.py" in names
+    assert not any(n.startswith(("matchers/", "examples/")) or n.endswith("my_matcher.py") for n in names)
     assert {"pin_match/data/lookalike_src/photos.csv", "pin_match/data/lookalike_src/NOTICE.md",
             "pin_match/matchers/fusion_lookalike.json", "pin_match/matchers/verify_myvlm.json",
             "pin_match/data/myvlm_boxes.csv"} <= names  # real sets build, the carried fits load
