@@ -59,7 +59,7 @@ def _print(title: str, rows: list[dict]) -> None:
 
 def run(quick: bool = False) -> dict:
     from pin_match.nn.head import load_head
-    from pin_match.training import TrainConfig, compare_with_frozen, scored_from_store, train, tuned_sigma
+    from pin_match.training import TrainConfig, compare_with_frozen, scored_from_store, sigma_on_split, train
     from pin_match.training.config import default_backbone
     from pin_match.training.features import build_features
 
@@ -95,7 +95,7 @@ def run(quick: bool = False) -> dict:
           f"{config['history'][0]['val_auroc']:.3f})")
 
     head, _ = load_head(head_dir)
-    sigmas = dict(frozen=tuned_sigma(scored_from_store(fs, store, None, "frozen")), learned=config["sigma"])
+    sigmas = dict(frozen=sigma_on_split(scored_from_store(fs, store, None, "frozen")), learned=config["sigma"])
     synth = compare_with_frozen(fs, store, head, sigmas, split="val")
     rows = [_row(n, synth[n]) for n in ("frozen", "learned")]
     _print(f"synthetic val ({fs.manifest.get('name')}, objects never seen in training)", rows)

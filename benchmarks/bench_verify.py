@@ -16,8 +16,8 @@ from pathlib import Path
 from benchmarks.framesets import real_photos
 from benchmarks.timing import fastest
 from pin_match import create_matcher
+from pin_match.fitting.verifier import fit_verifier
 from pin_match.matchers.verify import SIGNALS
-from pin_match.training.verifier import fit_verifier
 
 TARGET_RATIO = 2.0
 

@@ -21,7 +21,7 @@ LAYERS = {
     "pin_match.matchers": 4,
     "pin_match.scoring": 5,
     "pin_match.evaluation": 6,
-    "pin_match.training": 7, "pin_match.pin_agent": 7,
+    "pin_match.training": 7, "pin_match.fitting": 7, "pin_match.pin_agent": 7,
     "pin_match.cli": 8,
 }
 # the package's own face: re-exports, above everything

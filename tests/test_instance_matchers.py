@@ -169,7 +169,7 @@ def test_default_fusion_file_is_valid():
 # ------------------------------------------------------------------ fitting
 
 def test_logistic_fit_recovers_a_separating_direction():
-    from pin_match.training.fusion import logistic_fit
+    from pin_match.fitting.logistic import logistic_fit
 
     rng = np.random.default_rng(0)
     x = rng.normal(size=(400, 2))
@@ -179,7 +179,7 @@ def test_logistic_fit_recovers_a_separating_direction():
 
 
 def test_fit_fusion_on_cached_tables(tiny_frameset, tmp_path):
-    from pin_match.training.fusion import fit_fusion
+    from pin_match.fitting.fusion import fit_fusion
 
     out = tmp_path / "f.json"
     spec = fit_fusion(tiny_frameset, COLOR_SIFT, out, split="train", out=tmp_path / "scores")

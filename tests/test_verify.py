@@ -9,9 +9,9 @@ import pandas as pd
 import pytest
 
 from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
+from pin_match.fitting.verifier import candidate_classes, candidate_table, fit_verifier, frame_scores, on_target
 from pin_match.matchers.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
 from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, read_verifier, verdict
-from pin_match.training.verifier import candidate_classes, candidate_table, fit_verifier, frame_scores, on_target
 
 # On the recolour set (pin-match realset, seed 0), the carried file: AUROC target vs its recoloured look-alike 0.794,
 # target vs rest 0.909; effnet there: 0.685 / 0.854 (docs/instance-matchers.md). The floors need the colour check to

@@ -21,7 +21,7 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.evaluator import split_frames
-from pin_match.evaluation.metrics import detection_metrics, frame_arrays
+from pin_match.evaluation.metrics import Scored, detection_metrics, frame_arrays
 from pin_match.evaluation.sweep import sweep
 from pin_match.scoring.table import ScoreTable
 
@@ -70,6 +70,12 @@ def choose_sigma(table: pd.DataFrame, objective: str, match_floor: float = DEFAU
     best = np.nanmax(values)
     index = int(np.flatnonzero(values == best)[-1])  # ties: the highest sigma
     return index, float(best)
+
+
+def sigma_for(scored: Scored, objective: str = DEFAULT_OBJECTIVE, match_floor: float = DEFAULT_MATCH_FLOOR) -> float:
+    """The sigma ``objective`` chooses on scored frames (a table or its arrays), as ``tune`` chooses it."""
+    curve = sweep(scored)
+    return float(curve["sigma"].iloc[choose_sigma(curve, objective, match_floor)[0]])
 
 
 def tune(table: ScoreTable, fs: FrameSet, objective: str = DEFAULT_OBJECTIVE, split: str = "train",

@@ -36,15 +36,16 @@ import torch
 
 from pin_match import atomic, outputs
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.tuning import sigma_for
 from pin_match.matchers.patch import patch_matcher
 from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
 from pin_match.scoring.cache import cache_dir
 from pin_match.training.checkpoint import load_state, params, save_state, write_head
-from pin_match.training.compare import choose_sigma_on, query_frames, validation_auroc
 from pin_match.training.config import TrainConfig, TrainingError, default_backbone
 from pin_match.training.data import TrainData, check_trainable, epoch_batches, prepare_data
 from pin_match.training.features import FeatureStore, build_features
 from pin_match.training.loss import batch_loss
+from pin_match.training.store_scores import query_frames, validation_auroc
 
 
 @contextmanager
@@ -140,7 +141,7 @@ def train(frameset: FrameSet | str | Path, out: str | Path, *, backbone: str | N
         if not interrupted:  # sigma once, on every frame of the held-out objects' episodes, with the best head
             final = ProjectionHead(store.dim, cfg.hidden)
             final.load_state_dict(best)
-            state["sigma"] = choose_sigma_on(query_frames(data, final.eval(), data.holdout_objects), cfg.objective)
+            state["sigma"] = sigma_for(query_frames(data, final.eval(), data.holdout_objects), cfg.objective)
         if resumed is None and state["epoch"] == 0:
             save_state(out, run, head, best, scale, bias, opt, state)
         return write_head(out, best, store, run, fs, data, cfg, state, finished=not interrupted)

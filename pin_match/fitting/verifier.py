@@ -25,9 +25,8 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels
+from pin_match.fitting.logistic import FitError, logistic_fit
 from pin_match.matchers.verify import SIGNALS, VERIFIER_FORMAT, VERIFIER_VERSION, VerifyMatcher, read_verifier, verdict
-from pin_match.training.config import TrainingError
-from pin_match.training.fusion import logistic_fit
 
 ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
 TARGET_FILL = 0.25     # ... or of the box covered by the target
@@ -86,7 +85,7 @@ def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.Dat
     classes = {"target": positive, "same_category": ~target_frame & same_frame, "other": ~target_frame & ~same_frame}
     counts = {name: int(mask.sum()) for name, mask in classes.items()}
     if not counts["target"] or not counts["same_category"] + counts["other"]:
-        raise TrainingError(f"verifier fit needs candidates on the target and in frames without it; got {counts}")
+        raise FitError(f"verifier fit needs candidates on the target and in frames without it; got {counts}")
     weights = np.zeros(len(table))
     for mask in classes.values():
         if mask.any():
@@ -130,7 +129,7 @@ def frame_scores(table: pd.DataFrame, spec: dict[str, Any]) -> pd.DataFrame:
     """Per frame, the verifier's score from cached candidate signals: its best candidate's probability."""
     missing = set(spec["coefs"]) - set(table.columns)
     if missing:
-        raise TrainingError(f"candidate table has no signal {sorted(missing)[0]!r} (of {', '.join(SIGNALS)})")
+        raise FitError(f"candidate table has no signal {sorted(missing)[0]!r} (of {', '.join(SIGNALS)})")
     probability = [verdict(spec, row) for row in table[list(spec["coefs"])].to_dict("records")]
     scored = table[["frame_id"]].assign(score=probability)
     return scored.groupby("frame_id", sort=False, as_index=False).score.max()

@@ -1,7 +1,7 @@
 """Fit a ``fusion`` file: logistic regression on component matchers' cached scores of a train split.
 
 The fusion matcher (``matchers/fusion.py``) only applies weights; fitting needs score tables
-and labels, which live above the matchers, so it is here. Each component is scored through
+and labels, which live above the matchers, so it is here, in ``pin_match.fitting``. Each component is scored through
 ``pin_match.scoring.score`` with the usual cache (a table already there is read, never
 recomputed). Frames are the positives when the target is visible; the negatives are split
 into same-category look-alike frames and all other frames, and the three classes weigh the
@@ -23,9 +23,9 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.fitting.logistic import FitError, logistic_fit
 from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match.scoring import RunOptions, score
-from pin_match.training.config import TrainingError
 
 Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform
 
@@ -37,35 +37,12 @@ def class_weights(labels: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, dict[st
     other = ~target & ~same
     counts = {"target": int(target.sum()), "same_category": int(same.sum()), "other": int(other.sum())}
     if not counts["target"] or not (counts["same_category"] + counts["other"]):
-        raise TrainingError(f"fusion fit needs target and non-target frames; the split has {counts}")
+        raise FitError(f"fusion fit needs target and non-target frames; the split has {counts}")
     weights = np.zeros(len(labels))
     for mask in (target, same, other):
         if mask.any():
             weights[mask] = 1.0 / mask.sum()
     return target.astype(float), weights, counts
-
-
-def logistic_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, iterations: int = 50) -> np.ndarray:
-    """Weighted, L2-penalised logistic regression by Newton steps; returns (intercept, coefs...).
-
-    Features are standardised inside, so the penalty treats a count and a cosine alike; the
-    returned coefficients apply to the raw features.
-    """
-    mean, std = x.mean(0), x.std(0)
-    std[std == 0] = 1.0
-    z = np.c_[np.ones(len(x)), (x - mean) / std]
-    penalty = np.diag([0.0] + [l2] * x.shape[1])
-    beta = np.zeros(z.shape[1])
-    for _ in range(iterations):
-        p = 1.0 / (1.0 + np.exp(-z @ beta))
-        grad = z.T @ (w * (p - y)) + penalty @ beta
-        hess = (z * (w * p * (1 - p))[:, None]).T @ z + penalty
-        step = np.linalg.solve(hess, grad)
-        beta -= step
-        if np.abs(step).max() < 1e-10:
-            break
-    coefs = beta[1:] / std
-    return np.r_[beta[0] - (coefs * mean).sum(), coefs]
 
 
 def component_scores(fs: FrameSet, components: list[Component], split: str, out: str | Path,
@@ -76,7 +53,7 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
     records = []
     for i, (name, overrides, transform) in enumerate(components):
         if transform not in TRANSFORMS:
-            raise TrainingError(f"fusion component {name}: transform {transform!r}; choose one of {sorted(TRANSFORMS)}")
+            raise FitError(f"fusion component {name}: transform {transform!r}; choose one of {sorted(TRANSFORMS)}")
         matcher = create_matcher(name, **overrides)
         table = score(fs, matcher, split=split, out=out, run=RunOptions(progress=progress))
         scored = scored_frames(labels, table)
@@ -84,7 +61,7 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
         records.append(dict(matcher=name, config=resolved_config(matcher), id=matcher.id, transform=transform))
     missing = labels[[f"s{i}" for i in range(len(components))]].isna().any(axis=1)
     if missing.any():
-        raise TrainingError(f"fusion fit: frame {labels.frame_id[missing].iloc[0]!r} has no score in some component")
+        raise FitError(f"fusion fit: frame {labels.frame_id[missing].iloc[0]!r} has no score in some component")
     return labels, records
 
 
@@ -98,7 +75,7 @@ def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], pat
     """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if not 0 <= points_from < len(components):
-        raise TrainingError(f"fusion fit: points_from={points_from} does not index the {len(components)} components")
+        raise FitError(f"fusion fit: points_from={points_from} does not index the {len(components)} components")
     labels, records = component_scores(fs, components, split, out, progress)
     y, weights, counts = class_weights(labels)
     x = np.column_stack([[TRANSFORMS[r["transform"]](float(s)) for s in labels[f"s{i}"]]

@@ -7,7 +7,7 @@ and TM / CM at the sigma tuned (PIN's first-match objective) on the development 
 splits. The default ``effnet`` comes from the same tables: the verifier's first candidate is
 the locate map's best cell, whose cosine is ``effnet``'s frame score.
 
-``python -m pin_match.training.verifier_report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT]
+``python -m pin_match.fitting.verifier_report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT]
 [--figure PNG]``
 """
 
@@ -29,10 +29,9 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels
 from pin_match.evaluation.metrics import auroc, detection_metrics, frame_arrays, ranking_metrics
 from pin_match.evaluation.paired import paired_comparison
-from pin_match.evaluation.sweep import sweep
-from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, choose_sigma
+from pin_match.evaluation.tuning import sigma_for
+from pin_match.fitting.verifier import candidate_table, fit_verifier, frame_scores
 from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, verdict
-from pin_match.training.verifier import candidate_table, fit_verifier, frame_scores
 
 
 def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, tuple[str, ...]]:
@@ -78,12 +77,6 @@ def auroc_same_interval(frames: pd.DataFrame, n_boot: int = 1000, seed: int = 0)
     return auroc(score[target], score[same]), float(low), float(high)
 
 
-def tuned_sigma(frames: pd.DataFrame) -> float:
-    """Sigma by PIN's first-match objective (pin-match tune's default) on these frames."""
-    curve = sweep(frame_arrays(frames))
-    return float(curve["sigma"].iloc[choose_sigma(curve, DEFAULT_OBJECTIVE)[0]])
-
-
 def report(train: Sequence[str], evals: Sequence[str], features: str | Path = outputs.FEATURES,
            n_boot: int = 1000) -> dict:
     """Every signal set and ``effnet`` on every evaluation set (val split where it has one, else all frames)."""
@@ -108,7 +101,7 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
         dev = pd.concat([scored(labels, score_of(tables[set_name])).assign(  # variants share ids
             frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
             for i, (set_name, labels) in enumerate(zip(dev_names, dev_labels))])
-        sigmas[name] = tuned_sigma(dev)
+        sigmas[name] = sigma_for(dev)
         for set_name, labels in eval_labels.items():
             frames = scored(labels, score_of(tables[set_name]))
             arrays = frame_arrays(frames)
@@ -165,7 +158,7 @@ def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str |
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pin_match.training.verifier_report",
+    p = argparse.ArgumentParser(prog="python -m pin_match.fitting.verifier_report",
                                 description=__doc__.splitlines()[0])
     p.add_argument("--train", nargs="+", required=True, help="development frame-sets: fitted and tuned on train")
     p.add_argument("--eval", nargs="+", required=True,

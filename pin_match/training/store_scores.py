@@ -96,15 +96,6 @@ def validation_auroc(scored: pd.DataFrame) -> float:
                  scored.score[~scored.target_visible & scored.same_visible].to_numpy())
 
 
-def choose_sigma_on(scored: pd.DataFrame, objective: str) -> float:
-    from pin_match.evaluation.sweep import sweep
-    from pin_match.evaluation.tuning import choose_sigma
-
-    curve = sweep(scored)
-    index, _ = choose_sigma(curve, objective)
-    return float(curve["sigma"].iloc[index])
-
-
 def scored_from_store(fs: FrameSet, store: FeatureStore, head: torch.nn.Module | None, name: str) -> pd.DataFrame:
     """Frame labels with the store-based score of every stored frame (the metrics' input), as scoring would give."""
     from pin_match.evaluation.labels import frame_labels, scored_frames
@@ -114,12 +105,14 @@ def scored_from_store(fs: FrameSet, store: FeatureStore, head: torch.nn.Module |
     return scored_frames(frame_labels(fs), ScoreTable(scores, dict(matcher=name, matcher_id=name)))
 
 
-def tuned_sigma(scored: pd.DataFrame, objective: str = "first-match", split: str = "train") -> float:
+def sigma_on_split(scored: pd.DataFrame, objective: str = "first-match", split: str = "train") -> float:
     """Sigma chosen on one split of scored frames, as ``pin-match tune`` chooses it."""
+    from pin_match.evaluation.tuning import sigma_for
+
     part = scored[scored.split == split]
     if part.empty:
         raise TrainingError(f"no scored frames of split {split!r} to tune sigma on")
-    return choose_sigma_on(part, objective)
+    return sigma_for(part, objective)
 
 
 def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module, sigmas: dict[str, float],
