@@ -79,7 +79,7 @@ def test_a_candidate_is_on_the_target_by_share_or_fill():
 
 def test_candidate_classes_drop_off_target_candidates_of_target_frames_and_balance_classes():
     labels = pd.DataFrame(dict(frame_id=["t", "s", "o"], target_visible=[True, False, False],
-                               same_visible=[False, True, False]))
+                               same_visible=[False, True, False], other_visible=[False, False, True]))
     table = pd.DataFrame(dict(frame_id=["t", "t", "s", "s", "o"], on_target=[True, False, False, False, False]))
     used, weights, counts = candidate_classes(table, labels)
     assert used.frame_id.tolist() == ["t", "s", "s", "o"]

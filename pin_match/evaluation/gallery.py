@@ -15,9 +15,10 @@ import numpy as np
 import pandas as pd
 
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.labels import frame_classes
 from pin_match.scoring.table import ScoreTable, points_at
 
-ROLE_NAMES = ("target", "same-category look-alike", "other", "nothing")
+ROLE_NAMES = ("target", "same-category look-alike", "other", "nothing")  # per class code, labels.TM .. OM
 # outline colours (RGB) per visibility role of the frame-set; the points are drawn in yellow with a black rim
 OUTLINE_RGB = {"target": (0, 220, 0), "same_category": (255, 40, 40), "other": (40, 160, 255)}
 POINT_RGB = (255, 230, 0)
@@ -38,10 +39,8 @@ class Section:
 
 
 def frame_roles(scored: pd.DataFrame) -> pd.Series:
-    """The role a frame counts as, by the metrics' precedence: target, then look-alike, then other, else nothing."""
-    role = np.select([scored.target_visible.astype(bool), scored.same_visible.astype(bool),
-                      scored.other_visible.astype(bool)], list(ROLE_NAMES[:3]), ROLE_NAMES[3])
-    return pd.Series(role, index=scored.index, name="role")
+    """The role a frame counts as: its class by the metrics' rule (``labels.frame_classes``), named."""
+    return pd.Series(np.asarray(ROLE_NAMES)[frame_classes(scored)], index=scored.index, name="role")
 
 
 def sections(scored: pd.DataFrame, sigma: float, cap: int = DEFAULT_CAP) -> list[Section]:

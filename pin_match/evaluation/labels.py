@@ -18,6 +18,11 @@ from pin_match.scoring.table import ScoreTable, points_at, require_finite
 SEEN_MIN_FRACTION = 0.05  # PIN: the target covers more than 5 % of the frame ...
 SEEN_MAX_DEPTH_M = 5.0    # ... and its mean depth is below 5 m
 
+CLASSES = ("TM", "CM", "GM", "OM")  # frame class codes 0..3, in PIN's order of precedence
+TM, CM, GM, OM = range(4)
+FIT_CLASSES = {"target": (TM,), "same_category": (CM,), "other": (GM, OM)}  # what a fit weighs equally
+UNUSED = -1  # a row a fit leaves out (``class_weights`` gives it no weight)
+
 LABEL_COLUMNS = ["frame_id", "episode_id", "step", "split", "target_category", "target_visible", "same_visible",
                  "other_visible", "target_pixels", "target_depth", "target_seen"]
 
@@ -51,6 +56,30 @@ def frame_labels(fs: FrameSet) -> pd.DataFrame:
     out["target_depth"] = mean_depth
     out["target_seen"] = seen_rule(pixels, area, mean_depth)
     return out[LABEL_COLUMNS]
+
+
+def frame_classes(labels: pd.DataFrame) -> np.ndarray:
+    """Each frame's class code (int8) by PIN's precedence: the target visible (TM), else a same-category
+    look-alike (CM), else another object (GM), else nothing (OM)."""
+    target, same, other = (labels[c].to_numpy(bool) for c in ("target_visible", "same_visible", "other_visible"))
+    return np.where(target, TM, np.where(same, CM, np.where(other, GM, OM))).astype(np.int8)
+
+
+def class_weights(classes: np.ndarray) -> tuple[np.ndarray, dict[str, int]]:
+    """Sample weights that give each of ``FIT_CLASSES`` the same total (1), and the rows per class.
+
+    The fits weigh target, same-category look-alike and other rows alike, so the few look-alike
+    frames that matter most are not drowned by empty rooms. A row of class ``UNUSED`` weighs 0;
+    an empty class adds nothing.
+    """
+    weights = np.zeros(len(classes))
+    counts = {}
+    for name, codes in FIT_CLASSES.items():
+        mask = np.isin(classes, codes)
+        counts[name] = int(mask.sum())
+        if counts[name]:
+            weights[mask] = 1.0 / counts[name]
+    return weights, counts
 
 
 def seen_rule(pixels: np.ndarray, area: np.ndarray, depth: np.ndarray) -> np.ndarray:

@@ -18,12 +18,11 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.labels import CM, GM, OM, TM, frame_classes
 from pin_match.scoring.table import require_finite
 
 SCORED_COLUMNS = ["frame_id", "episode_id", "step", "target_category", "target_visible", "same_visible",
                   "other_visible", "target_seen", "score"]
-CLASSES = ("TM", "CM", "GM", "OM")  # frame class codes 0..3, in PIN's order of precedence
-TM, CM, GM, OM = range(4)
 
 COUNT_KEYS = ("n_episodes", "n_matched_episodes", "n_first_tm", "n_frames", "n_matched", "n_tm", "n_cm", "n_gm",
               "n_om", "n_target", "n_seen", "n_seen_matched")
@@ -74,15 +73,16 @@ def frame_arrays(scored: pd.DataFrame) -> FrameArrays:
         if dup.size:
             raise MetricsError(f"episode {episode_ids[codes[dup[0]]]!r} has two frames at step {step[dup[0]]}")
 
-    def col(name: str) -> np.ndarray:
-        a = scored[name].to_numpy()
+    def col_of(a: np.ndarray) -> np.ndarray:
         return a if order is None else a[order]
+
+    def col(name: str) -> np.ndarray:
+        return col_of(scored[name].to_numpy())
 
     starts = np.flatnonzero(np.r_[True, np.diff(codes) != 0]) if len(codes) else np.zeros(0, np.int64)
     first_rows = starts if order is None else order[starts]  # each episode's first frame, in table rows
 
-    tv, sv, ov = (col(c).astype(bool) for c in ("target_visible", "same_visible", "other_visible"))
-    cls = np.where(tv, TM, np.where(sv, CM, np.where(ov, GM, OM))).astype(np.int8)
+    cls = col_of(frame_classes(scored))
     seen = col("target_seen").astype(np.float64)
     return FrameArrays(score=score if order is None else score[order], cls=cls,
                        episode=codes.astype(np.int64), seen=np.nan_to_num(seen, nan=0.0).astype(np.int8),

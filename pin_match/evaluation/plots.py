@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
-from pin_match.evaluation.metrics import CLASSES, Scored, as_arrays
+from pin_match.evaluation.labels import CLASSES
+from pin_match.evaluation.metrics import Scored, as_arrays
 
 MAX_PLOT_POINTS = 2000
 TITLE_WIDTH = 0.96  # share of the figure's width a title line may take

@@ -1,14 +1,13 @@
 """Fit a ``fusion`` file: logistic regression on component matchers' cached scores of a train split.
 
 The fusion matcher (``matchers/fusion.py``) only applies weights; fitting needs score tables
-and labels, which live above the matchers, so it is here, in ``pin_match.fitting``. Each component is scored through
+and labels, which live above the matchers, so it is here. Each component is scored through
 ``pin_match.scoring.score`` with the usual cache (a table already there is read, never
-recomputed). Frames are the positives when the target is visible; the negatives are split
-into same-category look-alike frames and all other frames, and the three classes weigh the
-same in the loss, so the few look-alike frames that matter most are not drowned by empty rooms.
-The file records the components (name, config, id), the frame-set's fingerprint and the
-split, so what a fusion was fitted on is never guessed.
-"""
+recomputed). Frames are the positives when the target is visible; the negatives are split by
+the metrics' frame classes into same-category look-alike frames and all other frames, and the
+three classes weigh the same in the loss (``labels.class_weights``). The file records the
+components (name, config, id), the frame-set's fingerprint and the split, so what a fusion was
+fitted on is never guessed."""
 
 from __future__ import annotations
 
@@ -22,27 +21,20 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.fitting.logistic import FitError, logistic_fit
+from pin_match.evaluation.labels import TM, class_weights, frame_classes, frame_labels, scored_frames
+from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match.scoring import RunOptions, score
 
 Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform
 
 
-def class_weights(labels: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
-    """(y, sample weight, class counts): target / same-category look-alike / other frames, each class summing to 1."""
-    target = labels.target_visible.to_numpy(bool)
-    same = labels.same_visible.to_numpy(bool) & ~target
-    other = ~target & ~same
-    counts = {"target": int(target.sum()), "same_category": int(same.sum()), "other": int(other.sum())}
-    if not counts["target"] or not (counts["same_category"] + counts["other"]):
-        raise FitError(f"fusion fit needs target and non-target frames; the split has {counts}")
-    weights = np.zeros(len(labels))
-    for mask in (target, same, other):
-        if mask.any():
-            weights[mask] = 1.0 / mask.sum()
-    return target.astype(float), weights, counts
+def fit_classes(labels: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+    """(y, sample weight, class counts) of labelled frames: the target is y = 1, each fit class weighs the same."""
+    classes = frame_classes(labels)
+    weights, counts = class_weights(classes)
+    require_classes(counts, "fusion fit")
+    return (classes == TM).astype(float), weights, counts
 
 
 def component_scores(fs: FrameSet, components: list[Component], split: str, out: str | Path,
@@ -77,7 +69,7 @@ def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], pat
     if not 0 <= points_from < len(components):
         raise FitError(f"fusion fit: points_from={points_from} does not index the {len(components)} components")
     labels, records = component_scores(fs, components, split, out, progress)
-    y, weights, counts = class_weights(labels)
+    y, weights, counts = fit_classes(labels)
     x = np.column_stack([[TRANSFORMS[r["transform"]](float(s)) for s in labels[f"s{i}"]]
                          for i, r in enumerate(records)])
     beta = logistic_fit(x, y, weights, l2)

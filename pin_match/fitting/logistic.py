@@ -1,4 +1,8 @@
-"""The weighted, L2-penalised logistic regression every fit here solves, and the error a fit raises."""
+"""The weighted, L2-penalised logistic regression every fit here solves, and the error a fit raises.
+
+Both fits weigh their rows by ``pin_match.evaluation.labels.class_weights`` (target, same-category
+look-alike and other rows alike); ``require_classes`` refuses a split that lacks a side.
+"""
 
 from __future__ import annotations
 
@@ -32,3 +36,9 @@ def logistic_fit(x: np.ndarray, y: np.ndarray, w: np.ndarray, l2: float, iterati
             break
     coefs = beta[1:] / std
     return np.r_[beta[0] - (coefs * mean).sum(), coefs]
+
+
+def require_classes(counts: dict[str, int], what: str) -> None:
+    """Refuse a fit without target rows or without any row that is not the target (``counts``: per fit class)."""
+    if not counts["target"] or not counts["same_category"] + counts["other"]:
+        raise FitError(f"{what} needs target rows and rows without the target; got {counts}")

@@ -6,7 +6,7 @@ or the target fills a quarter of it) is a positive; every candidate of a frame w
 target is a negative, of the same-category class when a look-alike is in view and of the
 other class otherwise; a candidate beside the target in a target frame says nothing about
 the target's signals and is left out. The three classes weigh the same, as in the score
-fusion. The signals of every candidate of a frame-set are computed once and cached by the
+fusion (``labels.class_weights``). The signals of every candidate of a frame-set are computed once and cached by the
 matcher's ``signals_id`` and the frame-set's fingerprint, so fits, ablations (signals left
 out) and evaluations reuse them; the frame score from cached signals is the matcher's own.
 """
@@ -24,8 +24,8 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.labels import frame_labels
-from pin_match.fitting.logistic import FitError, logistic_fit
+from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
+from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import SIGNALS, VERIFIER_FORMAT, VERIFIER_VERSION, VerifyMatcher, read_verifier, verdict
 
 ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
@@ -76,20 +76,17 @@ def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = o
 
 
 def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, dict[str, int]]:
-    """The candidates a fit uses, their sample weights (each class summing to 1) and the class counts."""
-    frame = labels.set_index("frame_id")
-    target_frame = table.frame_id.map(frame.target_visible).to_numpy(bool)
-    same_frame = table.frame_id.map(frame.same_visible).to_numpy(bool)
-    positive = table.on_target.to_numpy(bool) & target_frame
-    keep = positive | ~target_frame
-    classes = {"target": positive, "same_category": ~target_frame & same_frame, "other": ~target_frame & ~same_frame}
-    counts = {name: int(mask.sum()) for name, mask in classes.items()}
-    if not counts["target"] or not counts["same_category"] + counts["other"]:
-        raise FitError(f"verifier fit needs candidates on the target and in frames without it; got {counts}")
-    weights = np.zeros(len(table))
-    for mask in classes.values():
-        if mask.any():
-            weights[mask] = 1.0 / mask.sum()
+    """The candidates a fit uses, their sample weights (each class summing to 1) and the class counts.
+
+    A candidate has its frame's class (``labels.frame_classes``), except that in a target frame
+    only a candidate on the target is a positive; the others there are left out.
+    """
+    of_frame = pd.Series(frame_classes(labels), index=labels.frame_id.to_numpy())
+    classes = table.frame_id.map(of_frame).to_numpy(np.int8, copy=True)
+    classes[(classes == TM) & ~table.on_target.to_numpy(bool)] = UNUSED
+    weights, counts = class_weights(classes)
+    require_classes(counts, "verifier fit")
+    keep = classes != UNUSED
     return table[keep].reset_index(drop=True), weights[keep], counts
 
 
