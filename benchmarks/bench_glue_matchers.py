@@ -38,7 +38,7 @@ VARIANTS: dict[str, tuple[str, dict]] = {
 
 
 def real_inputs(quick: bool) -> tuple[Target, list[np.ndarray]]:
-    from pin_match.data.realset_photos import cutout_rgba, photo
+    from pin_match.data.sources.recolour_photos import cutout_rgba, photo
 
     view = cutout_rgba("motorcycle")
     target = Target("motorcycle", "motorcycle", (view, view, view), ("a red motorcycle",) * 3)

@@ -55,8 +55,8 @@ def _write_procedural(root: Path, n_frames: int, frames_per_episode: int, seed: 
 
 
 def real_photos(seed: int = 0) -> FrameSet:
-    """The real-photo frame-set (``pin-match realset``; needs scikit-image), cached per seed."""
-    from pin_match.data.realset import build
+    """The recolour frame-set (``pin-match data build recolour``; needs scikit-image), cached per seed."""
+    from pin_match.data.sources.recolour import build
 
     name = "realset" if seed == 0 else f"realset_seed{seed}"
     return cached(CACHE / name, lambda root: build(root, seed=seed, overwrite=True))

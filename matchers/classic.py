@@ -53,7 +53,7 @@ class SiftMatcher(Matcher):
     objects seen from afar yield few matches, and 2 suffice to hypothesise it. But any 2
     matches fit a similarity exactly, so 2 inliers prove nothing: a model counts only with
     ``min_inliers`` or more, else the reference scores 0. On real photos without the
-    target (scikit-image photos with other objects pasted, pin_match.data.realset seeds 0-2)
+    target (scikit-image photos with other objects pasted, pin_match.data.sources.recolour seeds 0-2)
     chance models reached 2 in 42 of 72 frames and at most 4; the target scored 5 or more
     in 80 of its 90 frames. With ``min_inliers`` 5 no such frame scores above 0, and the
     first-match, F1 and Youden objectives all choose sigma 5 there: the default.
@@ -146,7 +146,7 @@ class ColorMatcher(CropMatcher):
     candidates; the score is the best window, the points are window centres with their
     window score. Swain & Ballard's weight min(r, 1) saturates: a window of colours that
     are all rarer in the scene than in the target scores exactly 1, however distinctive,
-    and on real photos (pin_match.data.realset seeds 0-2) 77 of 90 target frames and 23 of 126
+    and on real photos (pin_match.data.sources.recolour seeds 0-2) 77 of 90 target frames and 23 of 126
     other frames scored 1.0, so no sigma told them apart. The weight r / (1 + r) keeps
     min(r, 1)'s order below r = 1 (where it is 0.5), is continuous and strictly increasing
     above, and never reaches 1. There it gives 214 distinct scores to 216 frames, and sigma

@@ -74,9 +74,9 @@ def tiny_frameset(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def real_frameset(tmp_path_factory):
-    """The real-photo frame-set (pin_match.data.realset, seed 0): built once per session from scikit-image's photos."""
+    """The real-photo frame-set (the recolour source, seed 0): built once per session from scikit-image's photos."""
     pytest.importorskip("skimage")
-    from pin_match.data.realset import build
+    from pin_match.data.sources.recolour import build
 
     return build(tmp_path_factory.mktemp("real") / "realset")
 

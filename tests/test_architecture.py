@@ -202,7 +202,7 @@ def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path)
         assert init.relative_to(ROOT).as_posix() in names, f"add {package} to pyproject's packages"
     assert "pin_match/matchers/__init__.py" in names
     assert not any(n.startswith(("matchers/", "examples/")) or n.endswith("my_matcher.py") for n in names)
-    assert {"pin_match/data/lookalike_src/photos.csv", "pin_match/data/lookalike_src/NOTICE.md",
+    assert {"pin_match/data/sources/lookalike_src/photos.csv", "pin_match/data/sources/lookalike_src/NOTICE.md",
             "pin_match/matchers/fusion_lookalike.json", "pin_match/matchers/verify_myvlm.json",
-            "pin_match/data/myvlm_boxes.csv"} <= names  # real sets build, the carried fits load
-    assert sum(n.startswith("pin_match/data/lookalike_src/photos/") for n in names) == 59
+            "pin_match/data/sources/myvlm_boxes.csv"} <= names  # real sets build, the carried fits load
+    assert sum(n.startswith("pin_match/data/sources/lookalike_src/photos/") for n in names) == 59

@@ -14,10 +14,14 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["synth", f"{tmp}/s2", "--objects-per-category", "1"],
         ["synth", f"{tmp}/s3", "--frames-per-episode", "0"],
         ["import", missing, "--objects", missing, "--out", f"{tmp}/imported"],
-        ["realset", fs],  # an existing frame-set, without --overwrite
-        ["lookalikes", fs],
-        ["lookalikes", "--variant", "pasted"],
-        ["lookalikes", "--prepare-from", missing, missing, "--src", f"{tmp}/src"],
+        ["data", "build", "recolour", fs],  # an existing frame-set, without --overwrite
+        ["data", "build", "core50", fs],
+        ["data", "build", "core50", f"{tmp}/c", "--variant", "drawn"],
+        ["data", "build", "grocery", f"{tmp}/g"],  # no --src: prepare first
+        ["data", "build", "no-such-source", f"{tmp}/n"],
+        ["data", "prepare", "core50", missing, missing, "--out", f"{tmp}/src"],
+        ["data", "prepare", "core50", missing, "--out", f"{tmp}/src"],  # two inputs needed
+        ["data", "prepare", "synthetic", missing, "--out", f"{tmp}/src"],
         ["score", missing, "--matcher", "color"],
         ["score", fs, "--matcher", "no-such-matcher"],
         ["score", fs, "--matcher", "color", "--shard", "3/3"],

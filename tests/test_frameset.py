@@ -9,7 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.data.frameset import MANIFEST, FrameSet, FrameSetError, read_image
+from pin_match.data.frameset import MANIFEST, FrameSet, FrameSetError
+from pin_match.data.images import ImageFileError, read_image
 from pin_match.data.writer import FrameSetWriter
 
 
@@ -139,10 +140,10 @@ def test_corrupt_and_truncated_images(broken):
     fs = FrameSet.load(broken)
     path = broken / "frames" / "ep_val" / "0001.jpg"
     path.write_bytes(path.read_bytes()[:50])
-    with pytest.raises(FrameSetError, match=r"corrupt or unreadable image .*0001\.jpg"):
+    with pytest.raises(ImageFileError, match=r"corrupt or unreadable image .*0001\.jpg"):
         fs.image("ep_val_0001")
     path.write_bytes(b"")
-    with pytest.raises(FrameSetError, match=r"0001\.jpg"):
+    with pytest.raises(ImageFileError, match=r"0001\.jpg"):
         fs.image("ep_val_0001")
 
 
@@ -152,7 +153,7 @@ def test_reference_without_alpha(broken):
     path = broken / "objects_images" / "mug_a" / "mug_a_0.png"
     rgb = read_image(path, rgba=True)[..., :3]
     cv2.imwrite(str(path), rgb)
-    with pytest.raises(FrameSetError, match=r"mug_a_0\.png has no alpha channel"):
+    with pytest.raises(ImageFileError, match=r"mug_a_0\.png has no alpha channel"):
         FrameSet.load(broken).target("mug_a")
 
 

@@ -189,7 +189,7 @@ def test_weights_of_another_architecture_are_refused(tmp_path):
 @pytest.fixture(scope="module")
 def realset_fs(tmp_path_factory):
     pytest.importorskip("skimage")
-    from pin_match.data.realset import build
+    from pin_match.data.sources.recolour import build
 
     return build(tmp_path_factory.mktemp("realset") / "fs")
 

@@ -13,15 +13,16 @@ import numpy as np
 import pytest
 
 from pin_match.cli.main import main
-from pin_match.data.grocery import (
+from pin_match.data.images import ImageFileError
+from pin_match.data.sources.grocery import (
     GROCERY_LICENCE,
     GROCERY_SOURCE,
     Product,
     plain_background_mask,
     prepare_grocery,
 )
-from pin_match.data.lookalike_source import LookalikeError, category_splits, load_photos
-from pin_match.data.lookalikes import build, plan_episodes
+from pin_match.data.sources.lookalike_set import build, plan_episodes
+from pin_match.data.sources.photo_folder import LookalikeError, category_splits, load_photos
 
 HEADER = ["Class Name (str)", "Class ID (int)", "Coarse Class Name (str)", "Coarse Class ID (int)",
           "Iconic Image Path (str)", "Product Description Path (str)"]
@@ -180,7 +181,7 @@ def test_errors_name_the_problem_and_leave_nothing_behind(tmp_path):
         prepare_grocery(repo, tmp_path / "src")
     (repo / "LICENSE").write_text(LICENCE_TEXT)
     (repo / "dataset/train/Packages/Juice/Bravo-Orange-Juice/Bravo-Orange-Juice_001.jpg").write_bytes(b"not a jpeg")
-    with pytest.raises(LookalikeError, match="cannot read image .*Bravo-Orange-Juice_001.jpg"):
+    with pytest.raises(ImageFileError, match="corrupt or unreadable image .*Bravo-Orange-Juice_001.jpg"):
         prepare_grocery(repo, tmp_path / "src")
     assert sorted(p.name for p in tmp_path.iterdir()) == ["repo"]  # no source folder, no staging folder
     for j in (1, 2):
@@ -201,13 +202,16 @@ def test_errors_name_the_problem_and_leave_nothing_behind(tmp_path):
 
 def test_cli_prepares_then_builds_and_fails_with_one_line(tmp_path, capsys):
     repo = fake_checkout(tmp_path / "repo")
-    assert main(["lookalikes", "--prepare-grocery", str(repo)]) == 2
-    assert "--prepare-grocery writes the source folder --src" in capsys.readouterr().err
-    assert main(["lookalikes", "--prepare-grocery", str(tmp_path / "nowhere"), "--src", str(tmp_path / "s")]) == 2
+    assert main(["data", "build", "grocery", str(tmp_path / "shot")]) == 2
+    assert "pin-match data prepare grocery GROCERY_REPO --out SRC" in capsys.readouterr().err
+    assert main(["data", "prepare", "grocery", str(tmp_path / "nowhere"), "--out", str(tmp_path / "s")]) == 2
     err = capsys.readouterr().err
     assert "classes.csv is missing" in err and len(err.strip().splitlines()) == 1
-    assert main(["lookalikes", "--prepare-grocery", str(repo), "--src", str(tmp_path / "src")]) == 0
-    assert main(["lookalikes", "--prepare-grocery", str(repo), "--src", str(tmp_path / "src")]) == 2
+    assert main(["data", "prepare", "grocery", str(repo), "--out", str(tmp_path / "src")]) == 0
+    assert main(["data", "prepare", "grocery", str(repo), "--out", str(tmp_path / "src")]) == 2
     assert "already exists" in capsys.readouterr().err
-    assert main(["lookalikes", str(tmp_path / "shot"), "--src", str(tmp_path / "src")]) == 0
+    assert main(["data", "build", "grocery", str(tmp_path / "shot"), "--variant", "pasted", "--src",
+                 str(tmp_path / "src")]) == 2
+    assert "no variant 'pasted'" in capsys.readouterr().err
+    assert main(["data", "build", "grocery", str(tmp_path / "shot"), "--src", str(tmp_path / "src")]) == 0
     assert (tmp_path / "shot").is_dir()

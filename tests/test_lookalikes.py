@@ -9,18 +9,19 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
-from pin_match.data.lookalike_source import (
+from pin_match.data.sources.lookalike_set import build, plan_episodes
+from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
+    PACKAGED_SRC,
     PHOTO_COLUMNS,
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
     instance_splits,
     load_photos,
-    object_mask,
     write_csv,
 )
-from pin_match.data.lookalikes import build, plan_episodes
+from pin_match.data.sources.prepare import object_mask
 
 
 def _photo(colour: tuple[int, int, int], seed: int, hand: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -198,8 +199,6 @@ def shipped_pasted(tmp_path_factory):
 
 
 def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_pasted):
-    from pin_match.data.lookalike_source import PACKAGED_SRC
-
     assert (len(shipped_pasted.objects), len(shipped_pasted.episodes), len(shipped_pasted.frames)) == (32, 13, 129)
     assert set(shipped_pasted.episodes.split) == {"train", "val"}
     roles = shipped_pasted.visibility.role.value_counts().to_dict()

@@ -8,8 +8,9 @@ import cv2
 import numpy as np
 import pytest
 
-from pin_match.data.lookalike_source import PACKAGED_SRC, read_rgb
+from pin_match.data.images import read_image
 from pin_match.data.mask_check import checked_mask, mask_problems
+from pin_match.data.sources.photo_folder import PACKAGED_SRC
 
 SKIN = (205, 150, 125)  # RGB, inside the YCrCb skin box
 BLUE = (30, 60, 200)
@@ -62,6 +63,6 @@ def test_every_shipped_cutout_passes_the_mask_check():
     rows = list(csv.DictReader(open(PACKAGED_SRC / "photos.csv", encoding="utf-8")))
     assert rows
     for r in rows:
-        rgb = read_rgb(PACKAGED_SRC / r["file"])
+        rgb = read_image(PACKAGED_SRC / r["file"])
         mask = cv2.imread(str(PACKAGED_SRC / r["mask"]), cv2.IMREAD_GRAYSCALE)
         assert mask_problems(rgb, mask) == [], r["photo_id"]

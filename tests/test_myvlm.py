@@ -13,10 +13,10 @@ import numpy as np
 import pytest
 
 from pin_match.cli.main import main
-from pin_match.data.lookalike_source import LookalikeError, load_photos
-from pin_match.data.lookalikes import build
+from pin_match.data.images import ImageFileError
 from pin_match.data.mask_check import mask_problems
-from pin_match.data.myvlm import (
+from pin_match.data.sources.lookalike_set import build
+from pin_match.data.sources.myvlm import (
     BOXES_CSV,
     CONCEPT_CATEGORIES,
     MAX_SIDE,
@@ -28,6 +28,7 @@ from pin_match.data.myvlm import (
     prepare_myvlm,
     read_boxes,
 )
+from pin_match.data.sources.photo_folder import LookalikeError, load_photos
 
 CONCEPTS = ("billy_dog", "maeve_dog", "bo", "my_cat", "mam")  # three dogs (bo from Yo'LLaVA), two cats
 OBJECT = (60, 80, 180, 260)  # x0, y0, x1, y1 of the ellipse's bounding box in every 400 x 300 photo
@@ -154,7 +155,7 @@ def test_errors_name_the_problem_and_leave_nothing_behind(tmp_path):
     (repo / "dataset/data_concept_embedding/bo/0.png").write_bytes(b"not a png")
     text = boxes.read_text().replace("bo,1.png", "bo,2.png")
     boxes.write_text(text)
-    with pytest.raises(LookalikeError, match="cannot read image .*bo/0.png"):
+    with pytest.raises(ImageFileError, match="corrupt or unreadable image .*bo/0.png"):
         prepare_myvlm(repo, tmp_path / "src", boxes=boxes)
     assert sorted(p.name for p in tmp_path.iterdir()) == ["boxes.csv", "repo"]  # no source, no staging folder
     boxes.write_text(text.replace(",,,,,a second dog", ",1,2,3,4,a second dog", 1))
@@ -163,8 +164,8 @@ def test_errors_name_the_problem_and_leave_nothing_behind(tmp_path):
     boxes.write_text("concept,file,x0,y0,x1,y1,dropped\nunicorn,1.jpg,0,0,5,5,\n")
     with pytest.raises(LookalikeError, match="unknown concept 'unicorn'"):
         read_boxes(boxes)
-    # the command line's flag reaches the preparer (the shipped boxes name photos this fake checkout lacks)
-    assert main(["lookalikes", "--prepare-myvlm", str(repo), "--src", str(tmp_path / "src")]) == 2
+    # the command line reaches the preparer (the shipped boxes name photos this fake checkout lacks)
+    assert main(["data", "prepare", "myvlm", str(repo), "--out", str(tmp_path / "src")]) == 2
 
 
 def test_the_shipped_boxes_cover_every_concept_with_look_alikes():

@@ -8,14 +8,14 @@ import pytest
 
 from pin_match import atomic
 from pin_match.data.compose import rotate_hue
-from pin_match.data.lookalike_source import (
+from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
     PHOTO_COLUMNS,
     LookalikeError,
     load_photos,
     write_csv,
 )
-from pin_match.data.recoloured import add_recoloured_twins
+from pin_match.data.sources.twins import add_recoloured_twins
 
 
 def test_rotate_hue_moves_masked_pixels_only():

@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli import catalog, evaluation, pages, training
+from pin_match.cli import catalog, data, evaluation, pages, training
 from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
 from pin_match.errors import PinMatchError
 
@@ -42,38 +42,6 @@ def _cmd_synth(a: argparse.Namespace) -> None:
               if v is not None}
     fs = generate(a.out, overwrite=a.overwrite, progress=run_options(a).progress, **kwargs)
     print(f"wrote {fs}")
-
-
-def _cmd_realset(a: argparse.Namespace) -> None:
-    from pin_match.data.realset import build
-
-    fs = build(a.out, seed=a.seed, overwrite=a.overwrite)
-    print(f"wrote {fs}")
-
-
-def _cmd_lookalikes(a: argparse.Namespace) -> None:
-    from pin_match.data.lookalike_source import LookalikeError
-    from pin_match.data.lookalikes import build, prepare_core50
-
-    prepare = ("--prepare-from" if a.prepare_from else "--prepare-grocery" if a.prepare_grocery else
-               "--prepare-myvlm" if a.prepare_myvlm else None)
-    if (a.src if prepare else a.out) is None:
-        raise LookalikeError(f"{prepare} writes the source folder --src: name it" if prepare else
-                             "name the frame-set folder to create: pin-match lookalikes OUT")
-    if a.prepare_from:
-        print(f"wrote {prepare_core50(*a.prepare_from, a.src, overwrite=a.overwrite)}")
-        return
-    if a.prepare_grocery:
-        from pin_match.data.grocery import prepare_grocery
-
-        print(f"wrote {prepare_grocery(a.prepare_grocery, a.src, overwrite=a.overwrite)}")
-        return
-    if a.prepare_myvlm:
-        from pin_match.data.myvlm import prepare_myvlm
-
-        print(f"wrote {prepare_myvlm(a.prepare_myvlm, a.src, overwrite=a.overwrite)}")
-        return
-    print(f"wrote {build(a.out, a.src, variant=a.variant, seed=a.seed, overwrite=a.overwrite)}")
 
 
 def _cmd_import(a: argparse.Namespace) -> None:
@@ -113,7 +81,8 @@ def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
     sub = p.add_subparsers(dest="command", required=True)
 
-    s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set (docs/synthetic.md)")
+    s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set of chosen sizes (docs/synthetic.md; "
+                                     "every other source: `pin-match data`)")
     s.add_argument("out", type=Path, help="frame-set folder to create")
     s.add_argument("--seed", type=int, help="generator seed (default 0); same seed and sizes, same bytes")
     s.add_argument("--episodes", type=int, help="episodes, half train and half val (default 24)")
@@ -137,43 +106,6 @@ def build_parser() -> argparse.ArgumentParser:
                         "re-encodes losslessly, 'jpeg' re-encodes at quality 95 (smaller, lossy)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at --out")
     s.set_defaults(func=_cmd_import)
-
-    s = sub.add_parser("realset", help="build the small real-photo test frame-set (needs scikit-image; offline)",
-                       description="Cut objects out of the real photos bundled in scikit-image's wheel and paste "
-                                   "them at other scales, rotations and backgrounds: 6 targets, each with a "
-                                   "same-category look-alike, 12 frames per target, exact instance masks. "
-                                   "Needs scikit-image (pip install 'pin-match[test]'). Layout: docs/frameset.md.")
-    s.add_argument("out", type=Path, help="frame-set folder to create")
-    s.add_argument("--seed", type=int, default=0, help="placement seed (default 0); the same seed gives the same bytes")
-    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
-    s.set_defaults(func=_cmd_realset)
-
-    s = sub.add_parser("lookalikes", help="build the real look-alike frame-set: real photos of several instances "
-                                          "per category (docs/lookalike-set.md; offline)",
-                       description="Real photos of 32 CORe50 object instances in 10 categories (CC BY 4.0), one "
-                                   "episode per target instance with its same-category look-alikes, other "
-                                   "categories and empty rooms. 'shot': the photos as frames; 'pasted': each object "
-                                   "cut out and pasted into real office photos (TUM RGB-D). The larger grocery set: "
-                                   "--prepare-grocery GROCERY_REPO --src SRC, then OUT --src SRC (shot only). "
-                                   "The MyVLM set: --prepare-myvlm MYVLM_REPO --src SRC, then OUT --src SRC.")
-    s.add_argument("out", type=Path, nargs="?", help="frame-set folder to create")
-    s.add_argument("--variant", choices=("shot", "pasted"), default="shot", help="photos as shot (default) or "
-                                                                                  "objects pasted into rooms")
-    s.add_argument("--src", type=Path, help="source folder of photos, masks and rooms (default: the one shipped "
-                                            "with pin_match)")
-    prepare = s.add_mutually_exclusive_group()
-    prepare.add_argument("--prepare-from", nargs=2, type=Path, metavar=("CORE50_REPO", "ROOMS_REPO"),
-                         help="instead of building: write --src from checkouts of giacomobartoli/core50_segmentation "
-                              "and gaoxiang12/slambook2 (automatic GrabCut masks)")
-    prepare.add_argument("--prepare-grocery", type=Path, metavar="GROCERY_REPO",
-                         help="instead of building: write --src from a checkout of marcusklasson/GroceryStoreDataset "
-                              "(31 packaged products: iconic image as reference, 6 store photos each; MIT)")
-    prepare.add_argument("--prepare-myvlm", type=Path, metavar="MYVLM_REPO",
-                         help="instead of building: write --src from a checkout of woonsango/MyVLM (real pets, "
-                              "toys and figurines, several per category; non-commercial licence; never shipped)")
-    s.add_argument("--seed", type=int, default=0, help="seed of frame choices and placements (default 0)")
-    s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set (or --src) at OUT")
-    s.set_defaults(func=_cmd_lookalikes)
 
     s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
     s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")
@@ -199,6 +131,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     catalog.add_commands(sub)
 
+    data.add_commands(sub)
     evaluation.add_commands(sub)
     pages.add_commands(sub)
     training.add_commands(sub)

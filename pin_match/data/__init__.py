@@ -1,8 +1,11 @@
-"""Frame-sets: loading and validating them, writing them, and the sources that make them.
+"""Frame-sets: the format (loading and validating, writing, reading image files) and the sources that make them.
 
-Sources: a PIN recording (``import_recording``), the synthetic generator (``synth``), the
-recolour set (``realset``) and the real look-alike sets (``lookalikes``, ``grocery``); the
-frame geometry and compositing they share live in ``compose``. Nothing here knows a matcher.
+The format: ``frameset`` (``FrameSet``), ``writer`` (``FrameSetWriter``), ``images`` (the one reader
+of photos, reference views and masks), ``importer`` (a PIN recording into a frame-set), and what
+every source that draws frames shares: ``compose`` (frame geometry, cut-outs, pasting) and
+``mask_check`` (the rules a shipped cut-out passes). The sources (synthetic, recolour, CORe50,
+grocery, MyVLM, recoloured twins) are one module each in the catalogue ``pin_match.data.sources``;
+the synthetic renderer itself is ``synth/``. Nothing here knows a matcher.
 """
 
 from pin_match.data.frameset import FrameSet, FrameSetError

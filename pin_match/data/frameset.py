@@ -17,6 +17,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, Target, TargetError
+from pin_match.data.images import read_image, read_label_png
 from pin_match.errors import PinMatchError
 
 FORMAT_NAME = "pin-match-frameset"
@@ -36,42 +37,6 @@ VISIBILITY = "visibility.parquet"
 
 class FrameSetError(PinMatchError, ValueError):
     """A frame-set on disk is missing something or contradicts itself."""
-
-
-def read_image(path: str | Path, *, rgba: bool = False) -> np.ndarray:
-    """Decode an image file to RGB (or RGBA) uint8, or fail naming the file."""
-    import cv2
-
-    path = Path(path)
-    try:
-        data = np.fromfile(path, dtype=np.uint8)
-    except OSError as exc:
-        raise FrameSetError(f"cannot read image {path}: {exc.strerror or exc}") from exc
-    flag = cv2.IMREAD_UNCHANGED if rgba else cv2.IMREAD_COLOR
-    arr = cv2.imdecode(data, flag) if data.size else None
-    if arr is None:
-        raise FrameSetError(f"corrupt or unreadable image {path}")
-    if rgba:
-        if arr.ndim != 3 or arr.shape[2] != 4:
-            raise FrameSetError(f"reference image {path} has no alpha channel (RGBA expected)")
-        if arr.dtype != np.uint8:
-            raise FrameSetError(f"reference image {path} must be 8-bit, got {arr.dtype}")
-        return cv2.cvtColor(arr, cv2.COLOR_BGRA2RGBA)
-    return cv2.cvtColor(arr, cv2.COLOR_BGR2RGB)
-
-
-def read_mask(path: str | Path) -> np.ndarray:
-    """Decode a 16-bit single-channel PNG (instance mask or depth in mm)."""
-    import cv2
-
-    path = Path(path)
-    data = np.fromfile(path, dtype=np.uint8) if path.exists() else np.empty(0, np.uint8)
-    if not data.size:
-        raise FrameSetError(f"missing or empty file {path}")
-    arr = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
-    if arr is None or arr.ndim != 2:
-        raise FrameSetError(f"corrupt or unreadable single-channel image {path}")
-    return arr
 
 
 def view_files(object_dir: Path) -> list[Path]:
@@ -139,14 +104,14 @@ class FrameSet:
 
     def instance_mask(self, frame_id: str) -> np.ndarray:
         """Per-pixel ``mask_value`` ids (0 = background); see ``visibility.mask_value``."""
-        return read_mask(self.root / self._frame(frame_id)["mask"])
+        return read_label_png(self.root / self._frame(frame_id)["mask"])
 
     def depth(self, frame_id: str) -> np.ndarray:
         """Depth in metres (float32), 0 where nothing was hit."""
         row = self._frame(frame_id)
         if "depth" not in row or not isinstance(row["depth"], str):
             raise FrameSetError(f"frame {frame_id!r} has no depth recorded")
-        return read_mask(self.root / row["depth"]).astype(np.float32) / 1000.0
+        return read_label_png(self.root / row["depth"]).astype(np.float32) / 1000.0
 
     def object_pixels(self, frame_id: str, object_id: str) -> np.ndarray:
         """Boolean mask of one visible object in one frame (all False when not visible)."""

@@ -35,8 +35,8 @@ from pin_match.data.frameset import (
     SPLITS,
     FrameSet,
     FrameSetError,
-    read_image,
 )
+from pin_match.data.images import read_image
 from pin_match.data.writer import FrameSetWriter
 
 TARGET_ID, SAME_CATEGORY_ID, OTHER_ID = 100000, 100001, 100002

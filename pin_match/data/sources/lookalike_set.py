@@ -1,13 +1,12 @@
 """A development frame-set of real look-alikes: several real instances per category, real photos of each.
 
-The recolour set (``pin_match.data.realset``) rewards colour: its look-alikes are the target's own
+The recolour set (``pin_match.data.sources.recolour``) rewards colour: its look-alikes are the target's own
 photo recoloured. This set's look-alikes are other physical objects of the same kind, photographed
 on their own, so a default chosen on it is chosen on the problem PIN poses.
 
-A source folder (its layout: ``pin_match.data.lookalike_source``) holds real photos, their masks
-and empty room photos. ``prepare_core50`` (and ``pin_match.data.grocery.prepare_grocery``) write
-one from public repositories (see docs/lookalike-set.md); ``build`` turns it into a frame-set in
-one of two variants:
+A source folder (its layout: ``pin_match.data.sources.photo_folder``) holds real photos, their
+masks and empty room photos. The sources ``core50`` (shipped), ``grocery``, ``myvlm`` and ``twins``
+write one (see docs/lookalike-set.md); ``build`` turns it into a frame-set in one of two variants:
 
 - ``shot``: the photo is the frame (letterboxed into the 640x360 portrait frame, grey bars), so
   the object keeps its real surroundings, hand and lighting;
@@ -26,7 +25,6 @@ same bytes.
 
 from __future__ import annotations
 
-import shutil
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -34,7 +32,6 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pin_match import atomic
 from pin_match.data.compose import (
     FRAME_HEIGHT,
     FRAME_WIDTH,
@@ -46,22 +43,17 @@ from pin_match.data.compose import (
     stable_seed,
 )
 from pin_match.data.frameset import FrameSet
-from pin_match.data.lookalike_source import (
+from pin_match.data.images import read_image, read_object_mask
+from pin_match.data.sources.photo_folder import (
     PACKAGED_SRC,
-    PHOTO_COLUMNS,
     REFERENCE_USE,
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
     instance_splits,
     load_photos,
-    object_mask,
     read_csv,
-    read_mask,
-    read_rgb,
-    write_csv,
 )
-from pin_match.data.mask_check import checked_mask
 from pin_match.data.writer import FrameSetWriter
 
 LOOKALIKES_VERSION = 1
@@ -70,92 +62,11 @@ N_REFERENCE_PHOTOS = 3
 N_OTHER_FRAMES = 4
 N_EMPTY_FRAMES = 3
 
-# CORe50 (Lomonaco & Maltoni, CoRL 2017): objects 1-50, five instances per category in this order
-CORE50_CATEGORIES = ("plug_adapter", "mobile_phone", "scissors", "light_bulb", "can", "glasses", "ball", "marker",
-                     "cup", "remote_control")
-CORE50_LICENCE = "CC BY 4.0 (CORe50, Lomonaco & Maltoni 2017; licence file: vlomonaco/core50 LICENSE)"
-CORE50_SOURCE = "github:giacomobartoli/core50_segmentation"
-TUM_LICENCE = "CC BY 4.0 (TUM RGB-D benchmark, Sturm et al. 2012; frames from fr3/long_office_household)"
-TUM_SOURCE = "github:gaoxiang12/slambook2"
-TUM_FRAMES = tuple(f"ch11/data/{k}.png" for k in range(1, 11))
-# CORe50 photos whose automatic mask, repaired or not, passes the rules of pin_match.data.mask_check but is wrong by
-# eye (every photo was looked at on a contact sheet of photo, mask outline and cut-out): prepare_core50 leaves them out
-CORE50_BAD_MASKS = {
-    "core50_s07_o01_007": "the mask takes the grey base only; the blue top is cut off",
-    "core50_s02_o08_005": "the mask takes a dark object beside the phone",
-    "core50_s06_o02_013": "the mask keeps the blurred hand (too pale for the skin rule)",
-    "core50_s02_o10_012": "the mask takes the shelf bracket beside the phone",
-    "core50_s03_o15_012": "the mask takes the wall between the handles and misses the handles",
-    "core50_s03_o17_008": "the mask takes the sheet of paper on the wall",
-    "core50_s05_o20_075": "the mask keeps the hand and arm (too pale for the skin rule)",
-    "core50_s04_o24_007": "the mask keeps the fingers (redder than the skin rule)",
-    "core50_s06_o25_060": "the mask keeps the hand below the can (too pale for the skin rule)",
-    "core50_s06_o27_055": "the mask keeps the hand (too pale for the skin rule)",
-    "core50_s03_o27_009": "the mask takes one lens and the wall, not the glasses",
-    "core50_s07_o26_008": "the mask takes one lens only",
-    "core50_s05_o36_007": "the mask keeps the hand and the floor",
-    "core50_s05_o47_011": "the mask keeps the thumb",
-    "core50_s09_o50_012": "the mask keeps the fingers",
-    "core50_s04_o02_005": "the mask keeps the fingers around the adapter (one pink with it in this light)",
-    "core50_s04_o28_006": "the skin repair eats the pink frame: the object's colour is in the skin box",
-    "core50_s06_o45_010": "the skin repair eats the mauve mug: the object's colour is in the skin box",
-    "core50_s09_o41_011": "the skin repair eats the red print of the mug",
-}
 # PIN's camera: 360 px wide, horizontal field of view 42 degrees (as the synthetic set), so a focal length of
 # 180 / tan(21 deg) = 469 px; an object of longest side L metres at D metres spans 469 * L / D pixels
 PIN_FOCAL_PX = 180 / np.tan(np.radians(21))
 PASTE_OBJECT_M = 0.6  # the larger personal objects of PIN (a backpack, a bag, a teddy bear)
 PASTE_DISTANCE_M = (1.0, 3.0)
-
-
-# ------------------------------------------------------------------ source folder
-def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | Path, *,
-                   overwrite: bool = False) -> Path:
-    """Write a source folder from a checkout of the CORe50 sample photos and of the room photos.
-
-    ``core50_repo``: giacomobartoli/core50_segmentation (its ``images/C_<session>_<object>_<frame>.png``,
-    128 px crops centred on the object). A photo whose mask fails ``checked_mask`` after its
-    repair, or is in ``CORE50_BAD_MASKS``, is left out (docs/lookalike-set.md lists them).
-    ``rooms_repo``: gaoxiang12/slambook2 (``ch11/data/1..10.png``: TUM RGB-D frames).
-    """
-    core50_repo, rooms_repo, out = Path(core50_repo), Path(rooms_repo), Path(out)
-    # only the 128 px crops: in the repository's 350 px frames (training_images/) the object is small and off
-    # centre, and the border-seeded mask takes the wall instead
-    sources = sorted((core50_repo / "images").glob("C_*.png"))
-    if not sources:
-        raise LookalikeError(f"{core50_repo} holds no CORe50 photos (images/C_*.png)")
-    rooms = [rooms_repo / f for f in TUM_FRAMES]
-    missing = [str(p) for p in rooms if not p.is_file()]
-    if missing:
-        raise LookalikeError(f"room photos missing: {missing}")
-    if out.exists():
-        if not overwrite:
-            raise LookalikeError(f"{out} already exists: pass overwrite=True to replace it")
-        shutil.rmtree(out)
-    photo_rows, room_rows = [], []
-    for src in sources:
-        _, session, obj, frame = src.stem.split("_")
-        o = int(obj)
-        photo_id = f"core50_s{int(session):02d}_o{o:02d}_{frame}"
-        rgb = read_rgb(src)
-        kept, _ = checked_mask(rgb, object_mask(rgb))
-        if kept is None or photo_id in CORE50_BAD_MASKS:
-            continue
-        file, mask = f"photos/{photo_id}{src.suffix}", f"masks/{photo_id}.png"
-        atomic.write_bytes(out / file, src.read_bytes())
-        atomic.write_image(out / mask, kept)
-        photo_rows.append(dict(photo_id=photo_id, instance_id=f"core50_o{o:02d}",
-                               category=CORE50_CATEGORIES[(o - 1) // 5],
-                               file=file, mask=mask, source=CORE50_SOURCE,
-                               source_path=str(src.relative_to(core50_repo)), licence=CORE50_LICENCE))
-    for k, src in enumerate(rooms, start=1):
-        file = f"rooms/tum_fr3_office_{k:02d}.png"
-        atomic.write_bytes(out / file, src.read_bytes())
-        room_rows.append(dict(room_id=f"tum_fr3_office_{k:02d}", file=file, source=TUM_SOURCE,
-                              source_path=str(src.relative_to(rooms_repo)), licence=TUM_LICENCE))
-    write_csv(out / "photos.csv", PHOTO_COLUMNS, photo_rows)
-    write_csv(out / "rooms.csv", ROOM_COLUMNS, room_rows)
-    return out
 
 
 # ------------------------------------------------------------------ plan
@@ -273,13 +184,15 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
 
     def image_and_mask(photo_id: str) -> tuple[np.ndarray, np.ndarray]:
         p = by_id[photo_id]
-        rgb = read_rgb(src / p.file)
-        return rgb, read_mask(src / p.mask, rgb.shape[:2])
+        rgb = read_image(src / p.file)
+        return rgb, read_object_mask(src / p.mask, rgb.shape[:2])
 
     used = _objects_used(plans, by_id)
     own_photos: dict[str, list[Photo]] = {}
     for p in sorted(photos, key=lambda p: p.photo_id):
         own_photos.setdefault(p.instance_id, []).append(p)
+    # "generator" is the name frame-sets of this builder have always recorded, not a module path: moving the
+    # code must not change a frame-set's bytes
     provenance = dict(generator="pin_match.lookalikes", version=LOOKALIKES_VERSION, variant=variant, seed=seed,
                       source=str(src.name), photos=len(photos), rooms=len(rooms),
                       frame_size=[FRAME_HEIGHT, FRAME_WIDTH])
@@ -299,7 +212,7 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
             for step, (kind, item) in enumerate(plan.frames):
                 rng = np.random.default_rng(stable_seed(seed, variant, plan.episode_id, step))
                 if kind == "empty":
-                    image = room_crop(read_rgb(room_file[item]), rng)
+                    image = room_crop(read_image(room_file[item]), rng)
                     writer.add_frame(plan.episode_id, step, image, np.zeros(image.shape[:2], np.uint16), {})
                     continue
                 image, frame_mask = _object_frame(*image_and_mask(item), variant, room_file, rng)
@@ -324,7 +237,7 @@ def _object_frame(rgb: np.ndarray, mask: np.ndarray, variant: str, room_file: di
     """A photo as the frame (``shot``), or its object pasted into a room (``pasted``); with the object's mask."""
     if variant == "shot":
         return letterbox(rgb, mask, rng)
-    room = room_crop(read_rgb(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)
+    room = room_crop(read_image(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)
     return paste_into(room, cutout(rgb, mask), rng)
 
 

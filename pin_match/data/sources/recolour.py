@@ -3,7 +3,7 @@
 Synthetic renders say little about whether a pretrained network recognises a real object;
 this set does, with nothing downloaded. Objects (a cup, a motorcycle, a rocket, a mission
 patch, a cat, a helmet) are cut out of scikit-image's bundled sample photos with GrabCut
-started from hand-set polygons (``realset_photos``), then pasted at other scales, rotations
+started from hand-set polygons (``recolour_photos``), then pasted at other scales, rotations
 and positions onto other real photos and textures. Each target has a same-category look-alike: a recoloured
 copy, or for the rocket another instance of the kind (the shuttle model in ``astronaut``).
 
@@ -34,10 +34,11 @@ from pin_match.data.compose import (
     stable_seed,
 )
 from pin_match.data.frameset import FrameSet
-from pin_match.data.realset_photos import BACKGROUNDS, RealSetError, cutout_rgba
+from pin_match.data.sources.catalogue import DataSource, register
+from pin_match.data.sources.recolour_photos import BACKGROUNDS, RecolourSetError, cutout_rgba
 from pin_match.data.writer import FrameSetWriter
 
-REALSET_VERSION = 1
+RECOLOUR_VERSION = 1
 DEFAULT_SEED = 0
 # per episode: frames with the target, with only its look-alike, with other objects only, with nothing
 FRAME_KINDS = ("target",) * 5 + ("lookalike",) * 3 + ("other",) * 2 + ("empty",) * 2
@@ -241,7 +242,7 @@ def episode_plan(seed: int, target: str) -> tuple[str, list[str], list[tuple[np.
     Everything is drawn from one generator seeded by (seed, target), so tests can rebuild
     exactly what ``build`` pasted.
     """
-    rng = np.random.default_rng(stable_seed(seed, "realset", target))
+    rng = np.random.default_rng(stable_seed(seed, "realset", target))  # the set's old name: same seeds, same bytes
     lookalike, others = episode_objects(target, rng)
     bg_names = sorted(BACKGROUNDS)
     frames = []
@@ -270,8 +271,10 @@ def build(out: str | Path, *, seed: int = DEFAULT_SEED, targets: tuple[str, ...]
     """
     unknown = [t for t in targets if t not in OBJECT_BY_ID]
     if unknown:
-        raise RealSetError(f"unknown real-photo target(s) {unknown}; known: {list(TARGETS)}")
-    provenance = dict(generator="pin_match.data.realset", version=REALSET_VERSION, seed=seed, targets=list(targets),
+        raise RecolourSetError(f"unknown real-photo target(s) {unknown}; known: {list(TARGETS)}")
+    # "generator": the name these frame-sets have always recorded (the module's old path), kept so they stay
+    # byte-identical
+    provenance = dict(generator="pin_match.data.realset", version=RECOLOUR_VERSION, seed=seed, targets=list(targets),
                       photos="scikit-image bundled sample data", frame_size=[FRAME_HEIGHT, FRAME_WIDTH])
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance)
     with writer:
@@ -289,3 +292,16 @@ def build(out: str | Path, *, seed: int = DEFAULT_SEED, targets: tuple[str, ...]
                 writer.add_frame(episode_id, step, camera_noise(image, seed, episode_id, step), mask,
                                  {k + 1: (p.object_id, roles[p.object_id]) for k, p in enumerate(placements)})
         return writer.close()
+
+
+def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:
+    return build(out, seed=seed, overwrite=overwrite)
+
+
+SOURCE = register(DataSource(
+    name="recolour",
+    summary="6 objects cut out of scikit-image's bundled photos, pasted onto real backgrounds; each target's "
+            "look-alike is its recoloured copy (needs scikit-image; 72 val frames)",
+    licence="scikit-image's bundled sample photos, each under the terms its skimage.data function states (most CC0 "
+            "or public domain); read from the installed scikit-image, not shipped by pin_match",
+    variants=("default",), make=_make))

@@ -2,7 +2,7 @@
 
 The objects are cut out of the photos with GrabCut started from hand-set polygons (OpenCV's
 RNG seeded, so the same masks every run); the backgrounds are regions of the same photos that
-hold none of the objects, and tinted textures. ``pin_match.data.realset`` pastes them into frames.
+hold none of the objects, and tinted textures. ``pin_match.data.sources.recolour`` pastes them into frames.
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from pin_match.errors import PinMatchError
 GRABCUT_MARGIN = 48  # px of surroundings GrabCut sees around a polygon
 
 
-class RealSetError(PinMatchError, RuntimeError):
+class RecolourSetError(PinMatchError, RuntimeError):
     """The real-photo set cannot be built here (scikit-image missing or its photos unreadable)."""
 
 
@@ -28,7 +28,7 @@ def _skimage_data():
     try:
         import skimage.data
     except ImportError as exc:
-        raise RealSetError("the real-photo frame-set needs scikit-image (pip install 'pin-match[test]' "
+        raise RecolourSetError("the real-photo frame-set needs scikit-image (pip install 'pin-match[test]' "
                            "or pip install scikit-image)") from exc
     return skimage.data
 
@@ -44,7 +44,7 @@ def photo(name: str) -> np.ndarray:
         else:
             img = getattr(data, name)()
     except Exception as exc:  # a photo that is not bundled is fetched over the network and fails offline
-        raise RealSetError(f"scikit-image photo {name!r} cannot be loaded offline: {exc}") from exc
+        raise RecolourSetError(f"scikit-image photo {name!r} cannot be loaded offline: {exc}") from exc
     img = np.asarray(img)
     if img.ndim == 2:
         img = np.dstack([img] * 3)
@@ -142,7 +142,7 @@ def cutout_rgba(name: str) -> np.ndarray:
     else:
         fg = inside
     if not fg.any():
-        raise RealSetError(f"cutout {name!r} of photo {cut.photo!r} came out empty")
+        raise RecolourSetError(f"cutout {name!r} of photo {cut.photo!r} came out empty")
     # the photo stays under alpha 0: warp_rgba interpolates across the outline from real surroundings
     return cutout(img, fg, clear_outside=False)
 

@@ -19,14 +19,11 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.data.compose import rotate_hue
-from pin_match.data.lookalike_source import (
-    OPTIONAL_PHOTO_COLUMNS,
-    PHOTO_COLUMNS,
-    LookalikeError,
-    read_csv,
-    staged_source,
-    write_csv,
-)
+from pin_match.data.images import read_image, read_object_mask
+from pin_match.data.sources import lookalike_set
+from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
+from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, LookalikeError, read_csv, write_csv
+from pin_match.data.sources.prepare import OUTPUT_COLUMNS, staged_source
 
 
 def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min_saturation: float = 60.0,
@@ -45,8 +42,8 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
         twins = []
         for instance in sorted({r["instance_id"] for r in rows if r["split"] == split}):
             photos = [r for r in rows if r["instance_id"] == instance]
-            images = [(r, cv2.cvtColor(cv2.imread(str(src / r["file"])), cv2.COLOR_BGR2RGB),
-                       cv2.imread(str(src / r["mask"]), cv2.IMREAD_GRAYSCALE) > 127) for r in photos]
+            images = [(r, rgb, read_object_mask(src / r["mask"], rgb.shape[:2]) > 0)
+                      for r in photos for rgb in [read_image(src / r["file"])]]
             saturation = np.concatenate([cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)[..., 1][mask] for _, rgb, mask in images])
             if saturation.mean() < min_saturation:
                 continue
@@ -56,5 +53,14 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
                 twins.append({**r, "photo_id": twin, "instance_id": f"{instance}_hue{hue}",
                               "file": f"photos/{twin}.png",
                               "source": f"{r['source']} (hue rotated by {hue} under the mask by pin_match)"})
-        write_csv(stage / "photos.csv", [*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS], rows + twins)
+        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows + twins)
     return out
+
+
+SOURCE = register(DataSource(
+    name="twins",
+    summary="a prepared look-alike source folder plus hue-rotated twins of its colourful train instances "
+            "(prepare from a source folder that has a split column, e.g. a MyVLM or grocery one)",
+    licence="that of the source folder's photos (twins are derived from them; photos.csv says so)",
+    variants=lookalike_set.VARIANTS, make=lookalike_set.build, src=SRC_REQUIRED,
+    prepare_inputs=("SRC",), make_source=add_recoloured_twins))

@@ -1,43 +1,34 @@
-"""The look-alike source folder: its layout, reading it, and the automatic object masks it holds.
+"""The look-alike source folder: its layout, reading and writing it, and the instance splits it implies.
 
-A source folder (``SRC``) holds the photos, one automatic mask per photo and where each came from:
+A source folder (``SRC``) holds the photos, one cut-out mask per photo and where each came from:
 
     SRC/photos.csv   photo_id, instance_id, category, file, mask, source, source_path, licence
                      (optional: split, use)
     SRC/rooms.csv    room_id, file, source, source_path, licence
     SRC/<file>       the photos and room photos as downloaded; SRC/<mask>: 8-bit, 255 = object
 
-``pin_match.data.lookalikes.prepare_core50`` and ``pin_match.data.grocery.prepare_grocery`` write
-one from public repositories (see docs/lookalike-set.md); ``pin_match.data.lookalikes.build``
-turns one into a frame-set. Two optional columns let a source fix what the build would choose:
-``split`` (the instance's split, on every photo of the source) and ``use`` (``reference``: the
-photo is one of its instance's reference views and never a frame).
+The sources that download photos (``core50``, ``grocery``, ``myvlm``, ``twins``) write one through
+``pin_match.data.sources.prepare``; ``pin_match.data.sources.lookalike_set.build`` turns one into a
+frame-set. Two optional columns let a source fix what the build would choose: ``split`` (the
+instance's split, on every photo of the source) and ``use`` (``reference``: the photo is one of
+its instance's reference views and never a frame).
 """
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import io
 import math
-import os
-import shutil
-import subprocess
-import tempfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-import cv2
-import numpy as np
-
 from pin_match import atomic
-from pin_match.data.compose import largest_piece, stable_seed
+from pin_match.data.compose import stable_seed
 from pin_match.data.frameset import SPLITS
-from pin_match.data.mask_check import skin_pixels
 from pin_match.errors import PinMatchError
 
-# the CORe50 photos, their masks and the TUM rooms, as prepare_core50 wrote them (licences: NOTICE.md there)
+# the CORe50 photos, their masks and the TUM rooms, as core50.prepare_core50 wrote them (licences: NOTICE.md there)
 PACKAGED_SRC = Path(__file__).resolve().with_name("lookalike_src")
 PHOTO_COLUMNS = ("photo_id", "instance_id", "category", "file", "mask", "source", "source_path", "licence")
 ROOM_COLUMNS = ("room_id", "file", "source", "source_path", "licence")
@@ -61,35 +52,6 @@ class Photo:
     use: str = ""  # REFERENCE_USE: a reference view only, never a frame; "" = either, by the plan's rule
 
 
-def object_mask(rgb: np.ndarray, iterations: int = 5) -> np.ndarray:
-    """An automatic mask (uint8, 255 = object) of the one object near the centre of a photo.
-
-    Why this recipe: the photos centre one hand-held object, so GrabCut is seeded with the
-    border as sure background and the middle as probable object; skin-coloured pixels
-    (``pin_match.data.mask_check.skin_pixels``) start as probable background so the
-    holding hand mostly drops out.
-    The largest connected piece is kept and its holes filled. When GrabCut keeps nothing, the
-    seed's middle minus skin is the mask. Deterministic (OpenCV's RNG seeded).
-    """
-    h, w = rgb.shape[:2]
-    seed = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
-    by, bx = max(h // 10, 2), max(w // 10, 2)
-    seed[by:h - by, bx:w - bx] = cv2.GC_PR_FGD
-    seed[skin_pixels(rgb) & (seed == cv2.GC_PR_FGD)] = cv2.GC_PR_BGD
-    edge = max(min(h, w) // 32, 1)
-    seed[:edge], seed[-edge:], seed[:, :edge], seed[:, -edge:] = (cv2.GC_BGD,) * 4
-    fallback = (seed == cv2.GC_PR_FGD).astype(np.uint8)
-    cv2.setRNGSeed(0)
-    cv2.grabCut(np.ascontiguousarray(rgb[..., ::-1]), seed, None, np.zeros((1, 65)), np.zeros((1, 65)),
-                iterations, cv2.GC_INIT_WITH_MASK)
-    fg = np.isin(seed, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
-    fg = largest_piece(cv2.morphologyEx(fg, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)))
-    if not fg.any():
-        fg = largest_piece(fallback)
-    holes = cv2.floodFill(fg.copy() * 255, np.zeros((h + 2, w + 2), np.uint8), (0, 0), 255)[1] == 0
-    return np.where((fg > 0) | holes, 255, 0).astype(np.uint8)
-
-
 def write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:
     """Write ``rows`` under a header of ``columns``, atomically (a source folder is never half-written)."""
     buf = io.StringIO()
@@ -107,22 +69,6 @@ def read_csv(path: Path, columns: Sequence[str]) -> list[dict]:
     if not rows or any(c not in rows[0] for c in columns):
         raise LookalikeError(f"{path} needs a header with {list(columns)} and at least one row")
     return rows
-
-
-def read_rgb(path: Path) -> np.ndarray:
-    img = cv2.imread(str(path), cv2.IMREAD_COLOR)
-    if img is None:
-        raise LookalikeError(f"cannot read image {path}")
-    return cv2.cvtColor(img, cv2.COLOR_BGR2RGB)
-
-
-def read_mask(path: Path, shape: tuple[int, int]) -> np.ndarray:
-    m = cv2.imread(str(path), cv2.IMREAD_GRAYSCALE)
-    if m is None or m.shape != shape:
-        raise LookalikeError(f"mask {path} is missing, unreadable or not the size of its photo {shape}")
-    if not (m > 127).any():
-        raise LookalikeError(f"mask {path} is empty")
-    return (m > 127).astype(np.uint8)
 
 
 def load_photos(src: str | Path) -> list[Photo]:
@@ -163,8 +109,6 @@ def instance_splits(photos: Sequence[Photo]) -> dict[str, str]:
     return out
 
 
-
-
 def category_splits(instances: Sequence) -> dict[str, str]:
     """train / val per instance (anything with ``instance_id`` and ``category``) of a downloaded source.
 
@@ -183,48 +127,3 @@ def category_splits(instances: Sequence) -> dict[str, str]:
     for k, c in enumerate(small):
         out.update({i.instance_id: ("train", "val")[k % 2] for i in by_category[c]})
     return out
-
-
-def checkout_commit(repo: Path) -> str | None:
-    """The commit a downloaded repository is at, recorded as the source of its photos (None when not a git checkout)."""
-    try:
-        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              timeout=30)
-    except (OSError, subprocess.SubprocessError):
-        return None
-    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
-
-
-@contextlib.contextmanager
-def staged_source(out: Path, overwrite: bool) -> Iterator[Path]:
-    """A hidden folder beside ``out`` to write a source folder into; it becomes ``out`` only if the block succeeds.
-
-    A download-and-prepare step that fails half-way leaves neither a partial source nor a
-    damaged earlier one behind.
-    """
-    if out.exists() and not overwrite:
-        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
-    atomic.ensure_dir(out.parent)
-    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
-    try:
-        yield stage
-        if out.exists():
-            shutil.rmtree(out)
-        os.replace(stage, out)
-    except BaseException:
-        shutil.rmtree(stage, ignore_errors=True)
-        raise
-
-
-def copy_packaged_rooms(stage: Path) -> list[dict[str, str]]:
-    """Copy the empty rooms shipped with pin_match into a source folder being written; their rows."""
-    rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
-    for r in rows:
-        atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
-    write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
-    return rows
-
-
-def room_sources(rows: list[dict[str, str]]) -> str:
-    """The rooms' licences and sources, once each, for a source folder's NOTICE."""
-    return "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in rows}))

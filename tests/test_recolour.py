@@ -1,4 +1,4 @@
-"""The real-photo frame-set: exact ground truth from the pastes, deterministic, loads as a frame-set."""
+"""The recolour source's frame-set: exact ground truth from the pastes, deterministic, loads as a frame-set."""
 
 from __future__ import annotations
 
@@ -10,15 +10,15 @@ import pytest
 
 pytest.importorskip("skimage")
 
-from pin_match.data import realset, realset_photos  # noqa: E402
 from pin_match.data.frameset import MANIFEST, FrameSet  # noqa: E402
+from pin_match.data.sources import recolour, recolour_photos  # noqa: E402
 
 SEED = 3
 
 
 @pytest.fixture(scope="module")
 def fs(tmp_path_factory):
-    return realset.build(tmp_path_factory.mktemp("real") / "fs", seed=SEED, targets=("patch_purple", "cup_red"))
+    return recolour.build(tmp_path_factory.mktemp("real") / "fs", seed=SEED, targets=("patch_purple", "cup_red"))
 
 
 def _digests(fs: FrameSet) -> dict[str, str]:
@@ -33,7 +33,7 @@ def test_loads_with_the_layout_the_issue_asks_for(fs):
     assert set(fs.frames.height) == {640} and set(fs.frames.width) == {360}
     for episode_id, target in (("real_patch_purple", "patch_purple"), ("real_cup_red", "cup_red")):
         frames = fs.frames[fs.frames.episode_id == episode_id].frame_id
-        assert len(frames) == len(realset.FRAME_KINDS)
+        assert len(frames) == len(recolour.FRAME_KINDS)
         vis = fs.visibility[fs.visibility.frame_id.isin(frames)]
         with_target = set(vis[vis.role == "target"].frame_id)
         with_lookalike = set(vis[vis.role == "same_category"].frame_id)
@@ -52,14 +52,14 @@ def test_instance_masks_are_the_pasted_masks(fs):
     pixels under an object's mask show that object."""
     for episode_id in fs.episodes.episode_id:
         target = episode_id.removeprefix("real_")
-        _, _, frames = realset.episode_plan(SEED, target)
+        _, _, frames = recolour.episode_plan(SEED, target)
         for step, (bg, placements) in enumerate(frames):
             frame_id = f"{episode_id}_{step:04d}"
             mask = fs.instance_mask(frame_id)
             image = fs.image(frame_id).astype(np.float32)
             expected = np.zeros(mask.shape, np.uint16)
             for k, p in enumerate(placements):  # an independent paste: later placements cover earlier ones
-                rgba = realset.placed(p)
+                rgba = recolour.placed(p)
                 h, w = rgba.shape[:2]
                 on = np.zeros(mask.shape, bool)
                 on[p.y:p.y + h, p.x:p.x + w] = rgba[:max(0, mask.shape[0] - p.y), :max(0, mask.shape[1] - p.x), 3] > 0
@@ -71,7 +71,7 @@ def test_instance_masks_are_the_pasted_masks(fs):
                 p = placements[value - 1]
                 assert row.object_id == p.object_id
                 assert row.pixels == int((mask == value).sum())
-                rgba = realset.placed(p)
+                rgba = recolour.placed(p)
                 crop = np.zeros(mask.shape + (3,), np.float32)
                 h, w = rgba.shape[:2]
                 crop[p.y:p.y + h, p.x:p.x + w] = rgba[:mask.shape[0] - p.y, :mask.shape[1] - p.x, :3]
@@ -83,34 +83,34 @@ def test_instance_masks_are_the_pasted_masks(fs):
 
 
 def test_same_seed_same_bytes_other_seed_other_frames(fs, tmp_path):
-    realset_photos.cutout_rgba.cache_clear()  # GrabCut runs again: it must come out the same
-    again = realset.build(tmp_path / "again", seed=SEED, targets=("patch_purple",))
+    recolour_photos.cutout_rgba.cache_clear()  # GrabCut runs again: it must come out the same
+    again = recolour.build(tmp_path / "again", seed=SEED, targets=("patch_purple",))
     mine, theirs = _digests(fs), _digests(again)
     shared = [k for k in theirs if k in mine and not k.startswith(("frames.parquet", "visibility", "objects.csv",
                                                                      "episodes", "objects_desc", MANIFEST))]
     assert any(k.startswith("frames/real_patch_purple/") for k in shared)
     assert any(k.startswith("objects_images/patch_purple/") for k in shared)
     assert {k: mine[k] for k in shared} == {k: theirs[k] for k in shared}
-    other = realset.build(tmp_path / "other", seed=SEED + 1, targets=("patch_purple",))
+    other = recolour.build(tmp_path / "other", seed=SEED + 1, targets=("patch_purple",))
     a = fs.frames.set_index("frame_id").sha256
     b = other.frames.set_index("frame_id").sha256
     assert (a.loc[b.index] != b).mean() > 0.5
 
 
 def test_missing_scikit_image_names_the_package(monkeypatch, tmp_path):
-    realset_photos.photo.cache_clear()
-    realset_photos.cutout_rgba.cache_clear()
+    recolour_photos.photo.cache_clear()
+    recolour_photos.cutout_rgba.cache_clear()
     monkeypatch.setitem(sys.modules, "skimage", None)
     monkeypatch.setitem(sys.modules, "skimage.data", None)
     try:
-        with pytest.raises(realset_photos.RealSetError, match="scikit-image"):
-            realset.build(tmp_path / "x", targets=("cup_red",))
+        with pytest.raises(recolour_photos.RecolourSetError, match="scikit-image"):
+            recolour.build(tmp_path / "x", targets=("cup_red",))
     finally:
-        realset_photos.photo.cache_clear()
-        realset_photos.cutout_rgba.cache_clear()
+        recolour_photos.photo.cache_clear()
+        recolour_photos.cutout_rgba.cache_clear()
     assert not (tmp_path / "x").exists()
 
 
 def test_unknown_target_is_refused(tmp_path):
-    with pytest.raises(realset_photos.RealSetError, match="no_such_thing"):
-        realset.build(tmp_path / "x", targets=("no_such_thing",))
+    with pytest.raises(recolour_photos.RecolourSetError, match="no_such_thing"):
+        recolour.build(tmp_path / "x", targets=("no_such_thing",))

@@ -7,7 +7,7 @@ look-alikes: three dogs, two cats, two cups, three sheep soft toys, ten toy figu
 figurines (``CONCEPT_CATEGORIES``). The three concepts with no other of their kind (a bean-bag
 chicken, a teapot, running shoes) are left out.
 
-``prepare_myvlm`` turns a checkout into the source folder ``pin_match.data.lookalikes.build``
+``prepare_myvlm`` turns a checkout into the source folder ``pin_match.data.sources.lookalike_set.build``
 reads (docs/lookalike-set.md):
 
 - a concept is an instance; its photos are used as listed in ``myvlm_boxes.csv`` (shipped with
@@ -20,7 +20,7 @@ reads (docs/lookalike-set.md):
 - its mask is GrabCut started from the box (``box_mask``); a photo whose mask fails
   ``pin_match.data.mask_check`` is left out, and NOTICE.md lists it with why. The hand rule is
   not applied: no kept photo shows a hand, and the skin box takes tan dogs and pink toys;
-- splits by instance with the grocery rule (``pin_match.data.lookalike_source.category_splits``): the toy
+- splits by instance with the grocery rule (``pin_match.data.sources.photo_folder.category_splits``): the toy
   figures are halved, the smaller categories go whole to one split so each keeps its look-alikes;
 - empty rooms: the TUM office photos shipped with pin_match.
 
@@ -36,22 +36,13 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pin_match import atomic
 from pin_match.data.compose import largest_piece
-from pin_match.data.lookalike_source import (
-    OPTIONAL_PHOTO_COLUMNS,
-    PHOTO_COLUMNS,
-    LookalikeError,
-    category_splits,
-    checkout_commit,
-    copy_packaged_rooms,
-    read_csv,
-    read_rgb,
-    room_sources,
-    staged_source,
-    write_csv,
-)
+from pin_match.data.images import read_image
 from pin_match.data.mask_check import mask_problems
+from pin_match.data.sources import lookalike_set
+from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
+from pin_match.data.sources.photo_folder import LookalikeError, category_splits, read_csv
+from pin_match.data.sources.prepare import Checkout, add_photo, notice, open_checkout, write_source_folder
 
 MYVLM_SOURCE = "github:woonsango/MyVLM"
 CONCEPT_FOLDER = Path("dataset", "data_concept_embedding")
@@ -78,7 +69,6 @@ PAD = 0.25  # of the box's width (height) added left and right (above and below)
 MAX_SIDE = 640  # the frame's height: a larger crop is never shown at full size
 GRABCUT_SIDE = 320
 GRABCUT_ITERATIONS = 5
-OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
 
 
 @dataclass(frozen=True)
@@ -165,89 +155,70 @@ def box_mask(rgb: np.ndarray, box: tuple[int, int, int, int]) -> np.ndarray:
 
 def prepare_myvlm(myvlm_repo: str | Path, out: str | Path, *, boxes: str | Path = BOXES_CSV,
                   overwrite: bool = False) -> Path:
-    """Write a look-alike source folder from a checkout of woonsango/MyVLM and the boxes of ``boxes``.
-
-    Written into a temporary folder beside ``out`` and renamed onto it at the end, so a
-    failure leaves no half-written source folder.
-    """
-    repo, out = Path(myvlm_repo), Path(out)
-    if not (repo / CONCEPT_FOLDER).is_dir():
-        raise LookalikeError(f"{repo} is not a MyVLM checkout: {repo / CONCEPT_FOLDER} is missing")
-    licence = repo / "LICENSE"
-    if not licence.is_file():
-        raise LookalikeError(f"{licence} is missing: Snap's licence must travel with the photos")
+    """Write a look-alike source folder from a checkout of woonsango/MyVLM and the boxes of ``boxes``."""
+    checkout = open_checkout(myvlm_repo, MYVLM_SOURCE, CONCEPT_FOLDER, "MyVLM",
+                             "Snap's licence must travel with the photos")
     photos = read_boxes(boxes)
-    missing = [f"{p.concept}/{p.file}" for p in photos if p.box and not (repo / CONCEPT_FOLDER / p.concept / p.file)
-               .is_file()]
+    folder = checkout.root / CONCEPT_FOLDER
+    missing = [f"{p.concept}/{p.file}" for p in photos if p.box and not (folder / p.concept / p.file).is_file()]
     if missing:
-        raise LookalikeError(f"{repo / CONCEPT_FOLDER} lacks photos boxed in {boxes}: {missing}")
-    commit = checkout_commit(repo)
-    source = f"{MYVLM_SOURCE}@{commit}" if commit else MYVLM_SOURCE
+        raise LookalikeError(f"{folder} lacks photos boxed in {boxes}: {missing}")
     split = category_splits(list({p.concept: p for p in photos if p.box}.values()))  # one entry per concept
-    with staged_source(out, overwrite) as stage:
-        rows, left_out = _write_photos(repo, stage, photos, source, split)
-        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = copy_packaged_rooms(stage)
-        atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, rows, left_out,
-                                                       room_rows))
-    return out
+    left_out = [(p, p.dropped) for p in photos if not p.box]
+
+    def write_photos(stage: Path) -> list[dict[str, str]]:
+        rows = []
+        for p in photos:
+            if p.box:
+                row, why = _photo_row(checkout, stage, p, split[p.instance_id])
+                if row:
+                    rows.append(row)
+                else:
+                    left_out.append((p, why))
+        return rows
+
+    return write_source_folder(out, write_photos, lambda rows, rooms: _notice(checkout, rows, left_out, rooms),
+                               overwrite=overwrite)
 
 
-def _write_photos(repo: Path, stage: Path, photos: list[BoxedPhoto], source: str,
-                  split: dict[str, str]) -> tuple[list[dict], list[tuple[BoxedPhoto, str]]]:
-    """The photos.csv rows of the photos kept, and each photo left out with why (by eye, or its mask)."""
-    rows, left_out = [], [(p, p.dropped) for p in photos if not p.box]
-    for p in photos:
-        if p.box:
-            row, why = _photo_row(repo, stage, p, source, split)
-            if row:
-                rows.append(row)
-            else:
-                left_out.append((p, why))
-    return rows, left_out
-
-
-def _photo_row(repo: Path, stage: Path, p: BoxedPhoto, source: str, split: dict[str, str]) -> tuple[dict | None, str]:
+def _photo_row(checkout: Checkout, stage: Path, p: BoxedPhoto, split: str) -> tuple[dict | None, str]:
     """Crop, mask and write one photo: its photos.csv row, or None and why its mask fails the check."""
     source_path = (CONCEPT_FOLDER / p.concept / p.file).as_posix()
-    crop, box = crop_to_box(read_rgb(repo / source_path), p.box)
+    crop, box = crop_to_box(read_image(checkout.root / source_path), p.box)
     kept = box_mask(crop, box)
     problems = mask_problems(crop, kept, hand=False)
     if problems:
         return None, "mask check: " + "; ".join(problems)
-    file, mask_file = f"photos/{p.photo_id}.jpg", f"masks/{p.photo_id}.png"
-    atomic.write_image(stage / file, crop, [cv2.IMWRITE_JPEG_QUALITY, 95])
-    atomic.write_image(stage / mask_file, kept)
+    file, mask_file = add_photo(stage, p.photo_id, crop, ".jpg", kept)
     return dict(photo_id=p.photo_id, instance_id=p.instance_id, category=p.category, file=file, mask=mask_file,
-                source=source, source_path=source_path,
+                source=checkout.source, source_path=source_path,
                 licence=YOLLAVA_LICENCE if p.concept in YOLLAVA_CONCEPTS else MYVLM_LICENCE,
-                split=split[p.instance_id], use=""), ""
+                split=split, use=""), ""
 
 
-def _notice(licence_text: str, commit: str | None, rows: list[dict], left_out: list[tuple[BoxedPhoto, str]],
+def _notice(checkout: Checkout, rows: list[dict], left_out: list[tuple[BoxedPhoto, str]],
             room_rows: list[dict]) -> str:
     dropped = "\n".join(f"  - `{p.concept}/{p.file}`: {why}" for p, why in sorted(left_out, key=lambda t: t[0].file))
-    return f"""# Sources and licences of these photos
-
-- `photos/` ({len(rows)} photos of {len({r['instance_id'] for r in rows})} concepts) and their masks
-  (`masks/`, by `pin_match.data.myvlm.box_mask` from the boxes in `pin_match/data/myvlm_boxes.csv`):
-  **MyVLM** concept photos, Y. Alaluf, E. Richardson, S. Tulyakov, K. Aberman and D. Cohen-Or,
-  "MyVLM: Personalizing VLMs for User-Specific Queries", ECCV 2024,
-  https://github.com/woonsango/MyVLM, commit {commit or 'unknown (not a git checkout)'}, folder
-  `{CONCEPT_FOLDER.as_posix()}/`. The concepts `{'` and `'.join(YOLLAVA_CONCEPTS)}` are pets from the
+    photos = f"""`photos/` ({len(rows)} photos of {len({r['instance_id'] for r in rows})} concepts) and their masks
+  (`masks/`, by `pin_match.data.sources.myvlm.box_mask` from the boxes in
+  `pin_match/data/sources/myvlm_boxes.csv`): **MyVLM** concept photos, Y. Alaluf, E. Richardson,
+  S. Tulyakov, K. Aberman and D. Cohen-Or, "MyVLM: Personalizing VLMs for User-Specific Queries",
+  ECCV 2024, https://github.com/woonsango/MyVLM, commit {checkout.commit or 'unknown (not a git checkout)'},
+  folder `{CONCEPT_FOLDER.as_posix()}/`. The concepts `{'` and `'.join(YOLLAVA_CONCEPTS)}` are pets from the
   Yo'LLaVA dataset (T. Nguyen et al., NeurIPS 2024), as MyVLM redistributes them.
   Licence: **Snap Inc.'s licence for non-commercial, academic purposes only**, copied below; do not
   redistribute these files for any other purpose. Each photo's licence and path are in `photos.csv`.
   Changes: cropped around the object, shrunk to at most {MAX_SIDE} px, re-encoded as JPEG, renamed,
   masks added.
 - Photos left out ({len(left_out)}):
-{dropped}
-- `rooms/` ({len(room_rows)} photos, copied from the look-alike source shipped with pin_match):
-  {room_sources(room_rows)}; each room's path there is in `rooms.csv`.
+{dropped}"""
+    return notice(photos, room_rows, "MyVLM", checkout.licence_text)
 
-## Licence of MyVLM
 
-```
-{licence_text.strip()}
-```
-"""
+SOURCE = register(DataSource(
+    name="myvlm",
+    summary="real look-alikes from a MyVLM checkout: pets, toys and figurines, several per category, boxed by "
+            "eye (prepare first; never shipped)",
+    licence=MYVLM_LICENCE,
+    variants=lookalike_set.VARIANTS, make=lookalike_set.build, src=SRC_REQUIRED,
+    prepare_inputs=("MYVLM_REPO",), make_source=prepare_myvlm))

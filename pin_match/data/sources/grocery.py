@@ -7,7 +7,7 @@ look-alike problem at a larger scale than the CORe50 crops the toolkit ships: ea
 product (one brand, flavour and fat content) and its coarse class holds other real products of the
 same kind, shape and often brand (Juice: 10 products, Milk: 6, Yoghurt: 6, three classes of 2).
 
-``prepare_grocery`` turns a checkout into the source folder ``pin_match.data.lookalikes.build``
+``prepare_grocery`` turns a checkout into the source folder ``pin_match.data.sources.lookalike_set.build``
 reads (docs/lookalike-set.md):
 
 - a product is an instance, its coarse class the category;
@@ -35,22 +35,12 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from pin_match import atomic
 from pin_match.data.compose import largest_piece
-from pin_match.data.lookalike_source import (
-    OPTIONAL_PHOTO_COLUMNS,
-    PHOTO_COLUMNS,
-    REFERENCE_USE,
-    LookalikeError,
-    category_splits,
-    checkout_commit,
-    copy_packaged_rooms,
-    object_mask,
-    read_rgb,
-    room_sources,
-    staged_source,
-    write_csv,
-)
+from pin_match.data.images import read_image
+from pin_match.data.sources import lookalike_set
+from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
+from pin_match.data.sources.photo_folder import REFERENCE_USE, LookalikeError, category_splits
+from pin_match.data.sources.prepare import Checkout, add_photo, notice, object_mask, open_checkout, write_source_folder
 
 GROCERY_SOURCE = "github:marcusklasson/GroceryStoreDataset"
 GROCERY_LICENCE = "MIT (Grocery Store Dataset, Klasson et al. 2019; Copyright (c) 2019 Marcus Klasson; file LICENSE)"
@@ -59,7 +49,7 @@ PHOTO_FOLDERS = ("train", "val", "test")  # the dataset's own photo splits, all 
 PHOTOS_PER_PRODUCT = 6
 BACKGROUND_TOLERANCE = 24  # iconic images: a pixel is product when a channel differs this much from the border
 CLASS_COLUMNS = ("Class Name (str)", "Coarse Class Name (str)", "Iconic Image Path (str)")
-OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
+CLASSES_CSV = Path("dataset", "classes.csv")
 
 
 @dataclass(frozen=True)
@@ -98,7 +88,7 @@ def plain_background_mask(rgb: np.ndarray, tolerance: int = BACKGROUND_TOLERANCE
 def read_products(repo: str | Path) -> list[Product]:
     """The packaged products of a checkout, with their iconic image and store photos."""
     repo = Path(repo)
-    classes = repo / "dataset" / "classes.csv"
+    classes = repo / CLASSES_CSV
     if not classes.is_file():
         raise LookalikeError(f"{repo} is not a Grocery Store Dataset checkout: {classes} is missing")
     with classes.open(newline="", encoding="utf-8") as f:
@@ -134,69 +124,58 @@ def spread(photos: tuple[Path, ...], n: int) -> list[Path]:
 
 def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_product: int = PHOTOS_PER_PRODUCT,
                     overwrite: bool = False) -> Path:
-    """Write a look-alike source folder from a checkout of marcusklasson/GroceryStoreDataset.
-
-    Everything is written into a temporary folder beside ``out`` and renamed onto it at the
-    end, so a failure leaves no half-written source folder.
-    """
-    repo, out = Path(grocery_repo), Path(out)
+    """Write a look-alike source folder from a checkout of marcusklasson/GroceryStoreDataset."""
     if photos_per_product < 2:
         raise LookalikeError(f"photos_per_product must be at least 2, not {photos_per_product}")
-    products = read_products(repo)
-    licence = repo / "LICENSE"
-    if not licence.is_file():
-        raise LookalikeError(f"{licence} is missing: the MIT notice must travel with the photos")
-    commit = checkout_commit(repo)
-    source = f"{GROCERY_SOURCE}@{commit}" if commit else GROCERY_SOURCE
+    checkout = open_checkout(grocery_repo, GROCERY_SOURCE, CLASSES_CSV, "Grocery Store Dataset",
+                             "the MIT notice must travel with the photos")
+    products = read_products(checkout.root)
     split = category_splits(products)
-    with staged_source(out, overwrite) as stage:
+
+    def write_photos(stage: Path) -> list[dict[str, str]]:
         rows = []
         for p in products:
-            iconic_id = f"{p.instance_id}_iconic"
-            mask = plain_background_mask(read_rgb(repo / p.iconic))
+            mask = plain_background_mask(read_image(checkout.root / p.iconic))
             if not mask.any():
-                raise LookalikeError(f"iconic image {repo / p.iconic} shows nothing on its plain background")
-            rows.append(_photo_row(repo, stage, p, iconic_id, p.iconic, mask, source, split, REFERENCE_USE))
+                raise LookalikeError(f"iconic image {checkout.root / p.iconic} shows nothing on its plain background")
+            rows.append(_photo_row(checkout, stage, p, f"{p.instance_id}_iconic", p.iconic, mask, split[p.instance_id],
+                                   REFERENCE_USE))
             for photo in spread(p.photos, photos_per_product):
                 photo_id = f"grocery_{photo.parts[1]}_{photo.stem.lower()}"  # dataset/<folder>/.../<name>.jpg
-                rows.append(_photo_row(repo, stage, p, photo_id, photo, object_mask(read_rgb(repo / photo)),
-                                       source, split, ""))
-        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = copy_packaged_rooms(stage)
-        atomic.write_text(stage / "NOTICE.md", _notice(licence.read_text(encoding="utf-8"), commit, products, rows,
-                                                       room_rows))
-    return out
+                rows.append(_photo_row(checkout, stage, p, photo_id, photo,
+                                       object_mask(read_image(checkout.root / photo)), split[p.instance_id], ""))
+        return rows
+
+    return write_source_folder(out, write_photos, lambda rows, rooms: _notice(checkout, products, rows, rooms),
+                               overwrite=overwrite)
 
 
-def _photo_row(repo: Path, stage: Path, product: Product, photo_id: str, path: Path, mask: np.ndarray,
-               source: str, split: dict[str, str], use: str) -> dict[str, str]:
-    file, mask_file = f"photos/{photo_id}{path.suffix.lower()}", f"masks/{photo_id}.png"
-    atomic.write_bytes(stage / file, (repo / path).read_bytes())
-    atomic.write_image(stage / mask_file, mask)
+def _photo_row(checkout: Checkout, stage: Path, product: Product, photo_id: str, path: Path, mask: np.ndarray,
+               split: str, use: str) -> dict[str, str]:
+    file, mask_file = add_photo(stage, photo_id, (checkout.root / path).read_bytes(), path.suffix.lower(), mask)
     return dict(photo_id=photo_id, instance_id=product.instance_id, category=product.category, file=file,
-                mask=mask_file, source=source, source_path=path.as_posix(), licence=GROCERY_LICENCE,
-                split=split[product.instance_id], use=use)
+                mask=mask_file, source=checkout.source, source_path=path.as_posix(), licence=GROCERY_LICENCE,
+                split=split, use=use)
 
 
-def _notice(licence_text: str, commit: str | None, products: list[Product], rows: list[dict],
-            room_rows: list[dict]) -> str:
+def _notice(checkout: Checkout, products: list[Product], rows: list[dict], room_rows: list[dict]) -> str:
     n_iconic = sum(r["use"] == REFERENCE_USE for r in rows)
-    return f"""# Sources and licences of these photos
-
-- `photos/` ({n_iconic} iconic product images and {len(rows) - n_iconic} store photos of
+    photos = f"""`photos/` ({n_iconic} iconic product images and {len(rows) - n_iconic} store photos of
   {len(products)} packaged products) and the masks made from them (`masks/`: iconic images by
-  `pin_match.data.grocery.plain_background_mask`, store photos by
-  `pin_match.data.lookalike_source.object_mask`): **Grocery Store Dataset**, M. Klasson, C. Zhang and
+  `pin_match.data.sources.grocery.plain_background_mask`, store photos by
+  `pin_match.data.sources.prepare.object_mask`): **Grocery Store Dataset**, M. Klasson, C. Zhang and
   H. Kjellstroem, "A Hierarchical Grocery Store Image Dataset with Visual and Semantic Labels",
-  WACV 2019, https://github.com/marcusklasson/GroceryStoreDataset, commit {commit or 'unknown (not a git checkout)'}.
+  WACV 2019, https://github.com/marcusklasson/GroceryStoreDataset,
+  commit {checkout.commit or 'unknown (not a git checkout)'}.
   Licence: **MIT**, copied below. Each photo's path in that repository is in `photos.csv`.
-  Changes: file names, masks added.
-- `rooms/` ({len(room_rows)} photos, copied from the look-alike source shipped with pin_match, which
-  re-encoded them as JPEG): {room_sources(room_rows)}; each room's path there is in `rooms.csv`.
+  Changes: file names, masks added."""
+    return notice(photos, room_rows, "the Grocery Store Dataset", checkout.licence_text)
 
-## Licence of the Grocery Store Dataset
 
-```
-{licence_text.strip()}
-```
-"""
+SOURCE = register(DataSource(
+    name="grocery",
+    summary="real look-alikes from a Grocery Store Dataset checkout: 31 packaged products in store photos, "
+            "iconic images as references (prepare first; shot only: store-photo masks are rough)",
+    licence="MIT (Grocery Store Dataset, Klasson et al. 2019)",
+    variants=("shot",), make=lookalike_set.build, src=SRC_REQUIRED,
+    prepare_inputs=("GROCERY_REPO",), make_source=prepare_grocery))

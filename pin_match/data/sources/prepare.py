@@ -1,0 +1,183 @@
+"""Writing a look-alike source folder from a downloaded repository: the steps every such source takes once.
+
+``open_checkout`` checks the download (the file that makes it the repository named, its
+licence file) and records the commit it is at; ``write_source_folder`` writes the folder into
+a hidden stage beside ``out`` (photos and masks by the source's own function, then
+``photos.csv``, the empty rooms shipped with pin_match and a NOTICE.md with the licence text)
+and renames it onto ``out`` only when all of that succeeded. ``object_mask`` is the automatic
+mask of a photo centred on one hand-held object, used by the sources that have no masks.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import subprocess
+import tempfile
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from pin_match import atomic
+from pin_match.data.compose import largest_piece
+from pin_match.data.mask_check import skin_pixels
+from pin_match.data.sources.photo_folder import (
+    OPTIONAL_PHOTO_COLUMNS,
+    PACKAGED_SRC,
+    PHOTO_COLUMNS,
+    ROOM_COLUMNS,
+    LookalikeError,
+    read_csv,
+    write_csv,
+)
+
+OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
+JPEG_QUALITY = 95  # photos a source re-encodes (cropped, recoloured) are stored at this quality
+
+
+@dataclass(frozen=True)
+class Checkout:
+    """A downloaded repository: where it is, which one (``github:owner/name``), its commit and licence text."""
+
+    root: Path
+    repo: str
+    commit: str | None  # None when the download is not a git checkout
+    licence_text: str
+
+    @property
+    def source(self) -> str:
+        """What photos.csv records as each photo's source: the repository at its commit."""
+        return f"{self.repo}@{self.commit}" if self.commit else self.repo
+
+
+def checkout_commit(repo: Path) -> str | None:
+    """The commit a downloaded repository is at (None when not a git checkout)."""
+    try:
+        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
+                              timeout=30)
+    except (OSError, subprocess.SubprocessError):
+        return None
+    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+
+
+def open_checkout(root: str | Path, repo: str, marker: str | Path, what: str, licence_note: str) -> Checkout:
+    """Check that ``root`` is a download of ``repo`` (it holds ``marker``) with a LICENSE file, and read both.
+
+    ``what`` names the repository in the error; ``licence_note`` says why its licence must come along.
+    """
+    root = Path(root)
+    if not (root / marker).exists():
+        raise LookalikeError(f"{root} is not a {what} checkout: {root / marker} is missing")
+    licence = root / "LICENSE"
+    if not licence.is_file():
+        raise LookalikeError(f"{licence} is missing: {licence_note}")
+    return Checkout(root, repo, checkout_commit(root), licence.read_text(encoding="utf-8"))
+
+
+@contextlib.contextmanager
+def staged_source(out: Path, overwrite: bool) -> Iterator[Path]:
+    """A hidden folder beside ``out`` to write a source folder into; it becomes ``out`` only if the block succeeds.
+
+    A download-and-prepare step that fails half-way leaves neither a partial source nor a
+    damaged earlier one behind.
+    """
+    if out.exists() and not overwrite:
+        raise LookalikeError(f"{out} already exists: pass overwrite=True (--overwrite) to replace it")
+    atomic.ensure_dir(out.parent)
+    stage = Path(tempfile.mkdtemp(prefix=f".{out.name}.", dir=out.parent))
+    try:
+        yield stage
+        if out.exists():
+            shutil.rmtree(out)
+        os.replace(stage, out)
+    except BaseException:
+        shutil.rmtree(stage, ignore_errors=True)
+        raise
+
+
+def add_photo(stage: Path, photo_id: str, image: bytes | np.ndarray, suffix: str,
+              mask: np.ndarray) -> tuple[str, str]:
+    """Write a photo (its downloaded bytes, or an RGB array re-encoded) and its mask; their paths in the folder."""
+    file, mask_file = f"photos/{photo_id}{suffix}", f"masks/{photo_id}.png"
+    if isinstance(image, bytes):
+        atomic.write_bytes(stage / file, image)
+    else:
+        atomic.write_image(stage / file, image, [cv2.IMWRITE_JPEG_QUALITY, JPEG_QUALITY] if suffix == ".jpg" else [])
+    atomic.write_image(stage / mask_file, mask)
+    return file, mask_file
+
+
+def copy_packaged_rooms(stage: Path) -> list[dict[str, str]]:
+    """Copy the empty rooms shipped with pin_match into a source folder being written; their rows."""
+    rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
+    for r in rows:
+        atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
+    write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
+    return rows
+
+
+def notice(photos: str, rooms: list[dict[str, str]], licensor: str, licence_text: str) -> str:
+    """A source folder's NOTICE.md: what ``photos`` says of the photos, the rooms' sources, the licence text."""
+    sources = "; ".join(sorted({f"{r['licence']}, from {r['source']}" for r in rooms}))
+    return f"""# Sources and licences of these photos
+
+- {photos.strip()}
+- `rooms/` ({len(rooms)} photos, copied from the look-alike source shipped with pin_match):
+  {sources}; each room's path there is in `rooms.csv`.
+
+## Licence of {licensor}
+
+```
+{licence_text.strip()}
+```
+"""
+
+
+def write_source_folder(out: str | Path, write_photos: Callable[[Path], list[dict[str, str]]],
+                        describe: Callable[[list[dict[str, str]], list[dict[str, str]]], str], *,
+                        overwrite: bool = False) -> Path:
+    """Write a source folder: ``write_photos(stage)`` writes the photos and masks and returns their rows.
+
+    Then ``photos.csv``, the shipped rooms and ``NOTICE.md`` (``describe(rows, room_rows)``); all
+    in a stage renamed onto ``out`` at the end, so a failure leaves no half-written folder.
+    """
+    out = Path(out)
+    with staged_source(out, overwrite) as stage:
+        rows = write_photos(stage)
+        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
+        room_rows = copy_packaged_rooms(stage)
+        atomic.write_text(stage / "NOTICE.md", describe(rows, room_rows))
+    return out
+
+
+def object_mask(rgb: np.ndarray, iterations: int = 5) -> np.ndarray:
+    """An automatic mask (uint8, 255 = object) of the one object near the centre of a photo.
+
+    Why this recipe: the photos centre one hand-held object, so GrabCut is seeded with the
+    border as sure background and the middle as probable object; skin-coloured pixels
+    (``pin_match.data.mask_check.skin_pixels``) start as probable background so the
+    holding hand mostly drops out.
+    The largest connected piece is kept and its holes filled. When GrabCut keeps nothing, the
+    seed's middle minus skin is the mask. Deterministic (OpenCV's RNG seeded).
+    """
+    h, w = rgb.shape[:2]
+    seed = np.full((h, w), cv2.GC_PR_BGD, np.uint8)
+    by, bx = max(h // 10, 2), max(w // 10, 2)
+    seed[by:h - by, bx:w - bx] = cv2.GC_PR_FGD
+    seed[skin_pixels(rgb) & (seed == cv2.GC_PR_FGD)] = cv2.GC_PR_BGD
+    edge = max(min(h, w) // 32, 1)
+    seed[:edge], seed[-edge:], seed[:, :edge], seed[:, -edge:] = (cv2.GC_BGD,) * 4
+    fallback = (seed == cv2.GC_PR_FGD).astype(np.uint8)
+    cv2.setRNGSeed(0)
+    cv2.grabCut(np.ascontiguousarray(rgb[..., ::-1]), seed, None, np.zeros((1, 65)), np.zeros((1, 65)),
+                iterations, cv2.GC_INIT_WITH_MASK)
+    fg = np.isin(seed, (cv2.GC_FGD, cv2.GC_PR_FGD)).astype(np.uint8)
+    fg = largest_piece(cv2.morphologyEx(fg, cv2.MORPH_OPEN, np.ones((3, 3), np.uint8)))
+    if not fg.any():
+        fg = largest_piece(fallback)
+    holes = cv2.floodFill(fg.copy() * 255, np.zeros((h + 2, w + 2), np.uint8), (0, 0), 255)[1] == 0
+    return np.where((fg > 0) | holes, 255, 0).astype(np.uint8)
