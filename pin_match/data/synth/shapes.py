@@ -130,7 +130,7 @@ def box(sx: float, sy: float, sz: float, uv_metres: float | None = None) -> Mesh
 def lathe(radii, heights, segments: int = 24, caps: bool = True) -> Mesh:
     """A surface of revolution about z from a profile (radius, height) listed bottom to top.
 
-    U runs around the axis (the seam at angle 0 faces +x, so front prints at U=0.75 face -y),
+    U runs around the axis (the seam at angle 0 faces +x, so front decals at U=0.75 face -y),
     V runs along the profile; caps close the ends with flat discs.
     """
     r = np.asarray(radii, float)
