@@ -8,6 +8,7 @@ are downloaded, which ``build SOURCE OUT --src SRC`` then reads.
 from __future__ import annotations
 
 import argparse
+import textwrap
 from pathlib import Path
 
 DATA_HELP = """Frame-set sources, one catalogue: list them, prepare one from its download, build its frame-set.
@@ -27,7 +28,8 @@ def _cmd_list(a: argparse.Namespace) -> None:
         prepare = f"prepare {' '.join(s.prepare_inputs)}" if s.prepare_inputs else "nothing to prepare"
         print(f"{name:10s} variants {', '.join(s.variants)}; {prepare}; --src {s.src}")
         if a.verbose:
-            print(f"{'':10s} {s.summary}\n{'':10s} licence: {s.licence}")
+            for text in (s.summary, f"licence: {s.licence}"):
+                print(textwrap.fill(text, 100, initial_indent=" " * 11, subsequent_indent=" " * 11))
 
 
 def _cmd_build(a: argparse.Namespace) -> None:
