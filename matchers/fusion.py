@@ -2,7 +2,7 @@
 
 No one matcher separates an instance from its look-alikes everywhere: part matching, the
 prototype, colour and keypoints each fail on different pairs. A fusion file (written by
-``pin_match.fitting.fusion.fit_fusion`` from cached score tables of a train split) names
+``pin_match.training.fusion.fit_fusion`` from cached score tables of a train split) names
 the component matchers with their configs and ids, a transform per component (``identity``,
 or ``log1p`` for match counts), and the weights of a logistic regression fitted there:
 
@@ -19,7 +19,6 @@ development frame-sets (docs/instance-matchers.md) is used.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -33,40 +32,15 @@ from pin_match.contract import (
     MatchResult,
     Modality,
     WeightsError,
-    WeightsSpec,
-    content_digest,
     register_matcher,
     weights_field,
 )
 from pin_match.matchers.composite import CompositeMatcher
+from pin_match.matchers.fitted import FittedFileSpec, read_fitted_file
 
 FUSION_FORMAT = "pin-match-fusion"
 FUSION_VERSION = 1
 TRANSFORMS = {"identity": lambda s: s, "log1p": lambda s: math.log1p(max(s, 0.0))}
-
-
-@dataclass(frozen=True)
-class FusionWeightsSpec(WeightsSpec):
-    """A fitted JSON file (a fusion's or a verifier's): the user's, else the one shipped beside these modules.
-
-    Its identity is the file's content even for the shipped one: a refitted file is new weights within one version.
-    """
-
-    def identity(self, override: str | None) -> dict[str, Any]:
-        if override is not None:
-            return super().identity(override)
-        return {"file_sha256": content_digest(str(self.resolve(None).resolve()))}
-
-
-def read_fitted_file(path: Path, kind: str, fmt: str, version: int) -> dict[str, Any]:
-    """A fitted JSON file of format ``fmt`` and ``version``: a WeightsError naming the ``kind`` file otherwise."""
-    try:
-        spec = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise WeightsError(f"{kind} file {path}: cannot read it as JSON ({exc})") from exc
-    if not isinstance(spec, dict) or spec.get("format") != fmt or spec.get("version") != version:
-        raise WeightsError(f"{kind} file {path}: not a {fmt} file of version {version}")
-    return spec
 
 
 def read_fusion(path: Path) -> dict[str, Any]:
@@ -102,9 +76,9 @@ class FusionMatcher(CompositeMatcher):
 
     Config = FusionConfig
     modality = Modality.VISUAL
-    weights_spec = FusionWeightsSpec(package="pin_match.matchers", package_file="fusion_lookalike.json",
-                                     distribution="pin-match",
-                                     license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
+    weights_spec = FittedFileSpec(package="pin_match.matchers", package_file="fusion_lookalike.json",
+                                  distribution="pin-match",
+                                  license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
     default_sigma = 0.0  # the logit at probability 1/2 under the fitting's class weights
     version = 1
     paper = "pin_match: score fusion fitted on a train split of real look-alikes"

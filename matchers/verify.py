@@ -22,7 +22,7 @@ with the references'. This matcher does that with the default ``effnet``:
    log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop,
    off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
-   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id):
+   split by ``pin_match.training.verifier.fit_verifier``; its content is hashed into the id):
    each candidate's score is the fitted probability that it is the target, the frame's is its
    best candidate's. A probability means one thing on every frame-set, but its level carries only
    partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
@@ -58,7 +58,7 @@ from pin_match.contract import (
 )
 from pin_match.matchers.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
 from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
-from pin_match.matchers.fusion import FusionWeightsSpec, read_fitted_file
+from pin_match.matchers.fitted import FittedFileSpec, read_fitted_file
 from pin_match.matchers.parts import part_matches, reference_cells
 from pin_match.matchers.patch import PatchSimilarityMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
@@ -141,9 +141,9 @@ class VerifyMatcher(CompositeMatcher):
 
     Config = VerifyConfig
     modality = Modality.VISUAL
-    weights_spec = FusionWeightsSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
-                                     distribution="pin-match",
-                                     license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
+    weights_spec = FittedFileSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
+                                  distribution="pin-match",
+                                  license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
     # PIN's first-match objective on MyVLM's train instances, both variants (docs/instance-matchers.md); how far this
     # one sigma carries to other sets is measured there: tune it on frames like the agent's
     default_sigma = 0.596
@@ -186,7 +186,7 @@ class VerifyMatcher(CompositeMatcher):
         if set(spec["coefs"]) != set(self.cfg.signals) or spec.get("signals_id") != self.signals_id:
             raise WeightsError(f"verifier file {path} was fitted on signals {sorted(spec['coefs'])} (signals id "
                                f"{spec.get('signals_id')}), this matcher computes {sorted(self.cfg.signals)} (signals "
-                               f"id {self.signals_id}): refit it with pin_match.fitting.verifier.fit_verifier")
+                               f"id {self.signals_id}): refit it with pin_match.training.verifier.fit_verifier")
         return spec
 
     def weights_hint(self, role: str) -> str:
