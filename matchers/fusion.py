@@ -2,7 +2,7 @@
 
 No one matcher separates an instance from its look-alikes everywhere: part matching, the
 prototype, colour and keypoints each fail on different pairs. A fusion file (written by
-``pin_match.training.fusion.fit_fusion`` from cached score tables of a train split) names
+``pin_match.fitting.fusion.fit_fusion`` from cached score tables of a train split) names
 the component matchers with their configs and ids, a transform per component (``identity``,
 or ``log1p`` for match counts), and the weights of a logistic regression fitted there:
 

@@ -22,7 +22,7 @@ with the references'. This matcher does that with the default ``effnet``:
    log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop,
    off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
-   split by ``pin_match.training.verifier.fit_verifier``; its content is hashed into the id):
+   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id):
    each candidate's score is the fitted probability that it is the target, the frame's is its
    best candidate's. A probability means one thing on every frame-set, but its level carries only
    partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
@@ -186,7 +186,7 @@ class VerifyMatcher(CompositeMatcher):
         if set(spec["coefs"]) != set(self.cfg.signals) or spec.get("signals_id") != self.signals_id:
             raise WeightsError(f"verifier file {path} was fitted on signals {sorted(spec['coefs'])} (signals id "
                                f"{spec.get('signals_id')}), this matcher computes {sorted(self.cfg.signals)} (signals "
-                               f"id {self.signals_id}): refit it with pin_match.training.verifier.fit_verifier")
+                               f"id {self.signals_id}): refit it with pin_match.fitting.verifier.fit_verifier")
         return spec
 
     def weights_hint(self, role: str) -> str:
