@@ -318,4 +318,4 @@ def test_compare_finds_each_matcher_by_its_config(tiny_frameset, tmp_path, capsy
     assert rc == 0 and configured != create_matcher("color").id
     assert configured in (tmp_path / "cmp" / "compare.md").read_text(encoding="utf-8")
     rc, out, err = _run(capsys, *common, "--cfg", "colour:stride=8")
-    assert rc == 2 and err.count("\n") == 1 and "--cfg for colour, which is not among the compared matchers" in err
+    assert rc == 2 and err.count("\n") == 1 and "overrides for colour, which is not among the compared matchers" in err

@@ -12,6 +12,7 @@ from pathlib import Path
 import pytest
 
 from pin_match.data.synth import generate
+from pin_match.evaluation import Bootstrap, EvalContext
 from pin_match.evaluation.analysis import AnalysisError, load_bench
 from pin_match.evaluation.bench import bench
 from pin_match.scoring import RunOptions
@@ -27,8 +28,8 @@ MATCHERS = ["sift", "color"]
 def bench_run(tmp_path_factory):
     """A demo-shaped folder: run/frameset (synthetic) plus bench's scores, thresholds and reports."""
     run = tmp_path_factory.mktemp("nb") / "run"
-    generate(run / "frameset", seed=1, episodes=4, objects_per_category=4, frames_per_episode=8, workers=1)
-    bench(run / "frameset", MATCHERS, run, n_boot=50, run=RunOptions(workers=1, progress=False))
+    fs = generate(run / "frameset", seed=1, episodes=4, objects_per_category=4, frames_per_episode=8, workers=1)
+    bench(EvalContext(fs, Bootstrap(n_boot=50)), MATCHERS, run, run=RunOptions(workers=1, progress=False))
     return run
 
 

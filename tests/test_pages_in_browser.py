@@ -20,6 +20,7 @@ import pytest
 from PIL import Image
 from test_report_page import SIGMA, make_table
 
+from pin_match.evaluation import Bootstrap, EvalContext
 from pin_match.evaluation.frameset_page import write_frameset_page
 from pin_match.evaluation.report import report
 
@@ -72,10 +73,28 @@ def check_page(browser: str, page: Path, shot_name: str) -> None:
 
 
 def test_report_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
-    report(make_table(tiny_frameset), tiny_frameset, tmp_path, sigma=SIGMA, split="all", n_boot=20)
+    report(make_table(tiny_frameset), EvalContext(tiny_frameset, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA,
+           split="all")
     check_page(browser, tmp_path / "report.html", "report.png")
 
 
 def test_frameset_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
     page = write_frameset_page(tiny_frameset, tmp_path, per_role=2)
     check_page(browser, page, "inspect.png")
+
+
+def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
+    """The demo's index.html (headline, paired comparison, each matcher's first match drawn, links) on a small set."""
+    import shutil
+
+    from pin_match.evaluation.demo import DemoSet, demo
+    from pin_match.scoring import RunOptions
+
+    def copy(out: Path, seed: int, run: RunOptions):
+        shutil.copytree(tiny_frameset.root, out)
+        return type(tiny_frameset).load(out)
+
+    sets = [DemoSet("tiny", "", "the tiny hand-made set", copy, ("color", "sift"))]
+    results = demo(tmp_path / "demo", sets, run=RunOptions(workers=1, progress=False))
+    assert len(results) == 1 and len(results[0].comparisons) == 1
+    check_page(browser, tmp_path / "demo" / "index.html", "index.png")

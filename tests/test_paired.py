@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.metrics import auroc, detection_metrics
+from pin_match.evaluation import EvalContext
+from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics
 from pin_match.evaluation.paired import (
     PairedError,
     disagreements,
@@ -31,7 +32,7 @@ def constructed(n_episodes: int = 12, seed: int = 0) -> pd.DataFrame:
 
 def test_identical_matchers_differ_by_zero_with_an_interval_around_it():
     a = constructed()
-    table = paired_comparison(a, a.copy(), 0.5, 0.5, n_boot=200)
+    table = paired_comparison(a, a.copy(), 0.5, 0.5, boot=Bootstrap(n_boot=200))
     assert (table["B - A"] == 0).all()
     assert ((table["CI low"] <= 0) & (table["CI high"] >= 0)).all()
     np.testing.assert_allclose(table.loc["AUROC", "A"], detection_metrics(a, 0.5)["auroc_target"])
@@ -42,7 +43,7 @@ def test_better_on_every_episode_gives_an_interval_above_zero():
     b = a.copy()
     b.loc[b.target_visible, "score"] += 1.0  # B ranks the target first and matches nothing else
     b.loc[~b.target_visible, "score"] -= 0.5
-    table = paired_comparison(a, b, 0.5, 0.5, n_boot=200)
+    table = paired_comparison(a, b, 0.5, 0.5, boot=Bootstrap(n_boot=200))
     for metric in ("AUROC", "AUROC-same", "TM", "FM-prec"):
         assert table.loc[metric, "CI low"] > 0, metric
     assert table.loc["FM-prec", "B"] == 100.0
@@ -58,8 +59,8 @@ def test_episodes_of_one_instance_are_resampled_together():
     one_each = {e: e for e in episodes}
     # ... which the grouping puts alone, or with all 11 others into one instance: then only 2 units are drawn
     two_units = {e: ("x" if e == "e00" else "y") for e in episodes}
-    narrow = paired_comparison(a, b, 0.5, 0.5, clusters=one_each, n_boot=400)
-    grouped = paired_comparison(a, b, 0.5, 0.5, clusters=two_units, n_boot=400)
+    narrow = paired_comparison(a, b, 0.5, 0.5, clusters=one_each, boot=Bootstrap(n_boot=400))
+    grouped = paired_comparison(a, b, 0.5, 0.5, clusters=two_units, boot=Bootstrap(n_boot=400))
     assert narrow.attrs["n_units"] == 12 and grouped.attrs["n_units"] == 2
     # with two units, a quarter of resamples never draw e00: the interval of TM reaches exactly 0
     assert grouped.loc["TM", "CI low"] == 0.0 < narrow.loc["TM", "CI high"]
@@ -102,13 +103,13 @@ def test_first_match_outcomes_and_disagreements():
 def test_different_frames_are_refused():
     a = constructed()
     with pytest.raises(PairedError, match="B scored 0 frames|A scored 6 frames"):
-        paired_comparison(a, a[a.episode_id != "e00"], 0.5, 0.5, n_boot=10)
+        paired_comparison(a, a[a.episode_id != "e00"], 0.5, 0.5, boot=Bootstrap(n_boot=10))
 
 
 def test_compare_writes_the_folder(tiny_frameset, tmp_path):
     from test_report_page import make_table
 
-    from pin_match.evaluation.compare import FILES, compare
+    from pin_match.evaluation.compare import AtSigma, compare
     from pin_match.evaluation.sigma import SigmaChoice
     from pin_match.scoring.table import ScoreTable
 
@@ -117,9 +118,11 @@ def test_compare_writes_the_folder(tiny_frameset, tmp_path):
     frames["score"] = np.where(frames.step == 0, 0.9, 0.1)  # B: the target and nothing else
     b = ScoreTable(frames, {**a.meta, "matcher_id": "better@def"})
     sigma = SigmaChoice(0.5, "given", "test")
-    paired, test = compare(a, b, tiny_frameset, sigma, sigma, tmp_path, split="all", n_boot=50)
+    done = compare(AtSigma(a, sigma), AtSigma(b, sigma), EvalContext(tiny_frameset, Bootstrap(n_boot=50)), tmp_path,
+                   split="all")
+    paired, test = done.paired, done.test
     assert paired.loc["FM-prec", "better@def"] == 100.0 and paired.loc["FM-prec", "stub@abc"] == 50.0
     assert (test["only_a"], test["only_b"], test["both"]) == (0, 1, 1)
-    assert all((tmp_path / name).is_file() for name in FILES)
-    page = (tmp_path / "compare.html").read_text(encoding="utf-8")
+    assert all(p.is_file() and p.parent == tmp_path for p in (done.folder.csv, done.folder.markdown, done.folder.page))
+    page = done.folder.page.read_text(encoding="utf-8")
     assert "ep_val_0002" in page and "McNemar" in page  # the planted false alarm of A is a disagreement

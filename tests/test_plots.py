@@ -9,6 +9,7 @@ import pandas as pd
 import pytest
 
 from pin_match.contract.registry import available_names
+from pin_match.evaluation import Bootstrap, EvalContext
 from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import SigmaChoice
 from pin_match.evaluation.tuning import OBJECTIVES
@@ -54,7 +55,8 @@ def test_report_plots_keep_titles_and_legends_inside_the_figure(tiny_frameset, t
     monkeypatch.setattr(plt, "close", figures.append)  # keep each figure open after it is saved, to measure it
     choice = SigmaChoice(LONGEST_SIGMA, LONGEST_SOURCE, "tuned, read from thresholds.json")
     out = tmp_path / "report"
-    report(scored_table(tiny_frameset, tmp_path, matcher_id), tiny_frameset, out, sigma=choice, n_boot=10)
+    report(scored_table(tiny_frameset, tmp_path, matcher_id), EvalContext(tiny_frameset, Bootstrap(n_boot=10)), out,
+           sigma=choice)
     title = f"{matcher_id}, split val, sigma = {LONGEST_SIGMA:g} ({LONGEST_SOURCE})"
     assert len(figures) == len(PLOTS) and all((out / name).stat().st_size > 0 for name in PLOTS)
     try:

@@ -8,6 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pin_match.evaluation import Bootstrap, EvalContext
 from pin_match.evaluation.gallery import OUTLINE_RGB, POINT_RGB, draw_frame, frame_points, section_figure, sections
 from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.evaluation.report import report
@@ -79,7 +80,7 @@ def test_mask_outline_follows_the_target_mask(tiny):
 
 def test_report_writes_a_self_contained_page(tiny, tmp_path):
     fs, table = tiny
-    result = report(table, fs, tmp_path, sigma=SIGMA, split="val", n_boot=20)
+    result = report(table, EvalContext(fs, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA, split="val")
     page = tmp_path / "report.html"
     assert str(page) in result["files"]
     text = page.read_text(encoding="utf-8")
@@ -102,16 +103,3 @@ def test_gallery_figure_for_notebooks(tiny):
     scored = scored_frames(frame_labels(fs), table)
     fig = section_figure(fs, table, sections(scored, SIGMA)[0], SIGMA, max_frames=2)
     assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title()
-
-
-def test_index_links_every_report_and_shows_the_tables(tiny, tmp_path):
-    from pin_match.evaluation.index_page import write_index
-
-    fs, table = tiny
-    for name in ("a", "b"):
-        report(table, fs, tmp_path / "reports" / name, sigma=SIGMA, split="val", n_boot=10)
-    joint = pd.DataFrame({"TM": [12.5]}, index=pd.Index(["stub@abc"], name="Matcher"))
-    page = write_index(tmp_path, {"synthetic": joint}, {"synthetic": "the caption"})
-    text = page.read_text(encoding="utf-8")
-    assert re.findall(r'<a href="([^"]+)"', text) == ["reports/a/report.html", "reports/b/report.html"]
-    assert "the caption" in text and "12.50" in text

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation import EvaluationError
+from pin_match.evaluation import Bootstrap, EvalContext, EvaluationError
 from pin_match.evaluation.labels import LabelError, frame_labels, localisation_hits, scored_frames
 from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
@@ -142,7 +142,8 @@ def test_missing_thresholds_file_says_how_to_make_one(tmp_path):
 def test_report_end_to_end(tiny_frameset, tmp_path):
     table = make_table(tiny_frameset, tmp_path)
     out = tmp_path / "report"
-    result = report(table, tiny_frameset, out, n_boot=50)  # sigma: the table's default 0.5; split val
+    # sigma: the table's default 0.5; split val
+    result = report(table, EvalContext(tiny_frameset, Bootstrap(n_boot=50)), out)
     for name in ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma_curves.png",
                  "score_distributions.png", "per_category.png"):
         assert (out / name).stat().st_size > 0, name
@@ -169,7 +170,7 @@ def test_report_end_to_end(tiny_frameset, tmp_path):
 
 def test_report_threshold_sources(tiny_frameset, tmp_path):
     table = make_table(tiny_frameset, tmp_path)
-    result = report(table, tiny_frameset, tmp_path / "r", sigma=0.95, n_boot=10)
+    result = report(table, EvalContext(tiny_frameset, Bootstrap(n_boot=10)), tmp_path / "r", sigma=0.95)
     assert result["metrics"]["tm_pct"] is None  # nothing matched
     assert "| n/a |" in (tmp_path / "r" / "metrics.md").read_text()
     assert json.loads((tmp_path / "r" / "metrics.json").read_text())["sigma_source"] == "given"
@@ -221,17 +222,21 @@ def test_bench_builds_labels_once_and_arrays_once_per_split(tiny_frameset, tmp_p
 
     labels = _count_calls(monkeypatch, frame_labels)
     arrays = _count_calls(monkeypatch, frame_arrays)
-    joint, results = bench(tiny_frameset, ["color", "sift"], tmp_path, n_boot=10,
-                           run=RunOptions(workers=1, progress=False))
+    done = bench(EvalContext(tiny_frameset, Bootstrap(n_boot=10)), ["color", "sift"], tmp_path,
+                 run=RunOptions(workers=1, progress=False))
     assert len(labels) == 1
     assert len(arrays) == 2 * 2
-    assert [r["matcher"] for r in results] == ["color", "sift"] and len(joint) == 2
+    assert [r["matcher"] for r in done.results] == ["color", "sift"] and len(done.joint) == 2
+    assert done.run.labels is done.run.context.labels and done.run.matchers == ["color", "sift"]
 
 
-def test_report_with_the_callers_labels_equals_report_without(tiny_frameset, tmp_path):
+def test_a_shared_context_gives_the_numbers_of_a_fresh_one(tiny_frameset, tmp_path):
+    """Tuning and reporting through one EvalContext (labels and arrays reused) equals each on its own."""
     table = make_table(tiny_frameset, tmp_path)
-    alone = report(table, tiny_frameset, tmp_path / "a", sigma=0.5, n_boot=20)
-    given = report(table, tiny_frameset, tmp_path / "b", sigma=0.5, n_boot=20, labels=frame_labels(tiny_frameset))
+    shared = EvalContext(tiny_frameset, Bootstrap(n_boot=20))
+    tuned = tune(table, shared)
+    given = report(table, shared, tmp_path / "b", sigma=0.5)
+    alone = report(table, EvalContext(tiny_frameset, Bootstrap(n_boot=20)), tmp_path / "a", sigma=0.5)
     assert (alone["metrics"], alone["ci95"]) == (given["metrics"], given["ci95"])
-    tuned = tune(table, tiny_frameset, labels=frame_labels(tiny_frameset))
     assert tuned["metrics_at_sigma"] == tune(table, tiny_frameset)["metrics_at_sigma"]
+    assert shared.scored(table, "val") is shared.scored(table, "val")

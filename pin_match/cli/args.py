@@ -35,8 +35,9 @@ def add_bench_config(s: argparse.ArgumentParser) -> None:
                         "effnet:weights=PATH (repeatable)")
 
 
-def bench_overrides(pairs: Sequence[str] | None) -> dict[str, dict[str, str]]:
-    """The overrides of ``add_bench_config`` by matcher name; the name ends at the first ':' before any '='."""
+def bench_overrides(pairs: Sequence[str] | None, matchers: Sequence[str], verb: str = "benched") -> dict[str, dict]:
+    """Each of ``matchers`` with its overrides from ``add_bench_config`` (the name ends at the first ':' before any
+    '='); overrides for a matcher not among them are refused before anything runs."""
     grouped: dict[str, list[str]] = {}
     for pair in pairs or []:
         name, sep, rest = pair.partition(":")
@@ -44,7 +45,11 @@ def bench_overrides(pairs: Sequence[str] | None) -> dict[str, dict[str, str]]:
             raise ConfigError(f"--cfg {pair!r}: expected MATCHER:KEY=VALUE (bench runs several matchers), "
                               "e.g. effnet:img_size=224")
         grouped.setdefault(name.strip(), []).append(rest)
-    return {name: parse_overrides(rest) for name, rest in grouped.items()}
+    stray = sorted(set(grouped) - set(matchers))
+    if stray:
+        raise ConfigError(f"config overrides for {', '.join(stray)}, which is not among the {verb} matchers "
+                          f"({', '.join(matchers)}): add it with --matcher or fix the name before ':'")
+    return {name: parse_overrides(grouped.get(name, [])) for name in matchers}
 
 
 def add_run_options(s: argparse.ArgumentParser, *, workers: str | None, batch_size: bool = True) -> None:

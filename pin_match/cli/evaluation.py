@@ -64,12 +64,15 @@ def _cmd_tune(a: argparse.Namespace) -> None:
 
 
 def _cmd_report(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.evaluator import EvalContext
+    from pin_match.evaluation.metrics import Bootstrap
     from pin_match.evaluation.report import report
 
     fs = FrameSet.load(a.frameset)
     table = _table(a, fs)
     out = a.out or cache_dir(outputs.REPORTS, table.matcher_id, fs.fingerprint) / str(a.split)
-    result = report(table, fs, out, sigma=a.threshold, thresholds=a.thresholds, split=a.split, n_boot=a.bootstrap)
+    result = report(table, EvalContext(fs, Bootstrap(n_boot=a.bootstrap)), out, sigma=a.threshold,
+                    thresholds=a.thresholds, split=a.split)
     m = result["metrics"]
     print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "
           f"%Match {_fmt(m.get('match_pct'))}  TM {_fmt(m.get('tm_pct'))}  CM {_fmt(m.get('cm_pct'))}  "
@@ -95,37 +98,38 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.bench import bench
-    from pin_match.evaluation.index_page import write_index
+    from pin_match.evaluation.compare import compare_bench
+    from pin_match.evaluation.index_page import SetResults, write_index
     from pin_match.evaluation.tables import markdown_table
 
-    joint, _ = bench(a.frameset, a.matcher, a.out, objective=a.objective, sigma_from=a.sigma_from,
-                     overrides=bench_overrides(a.cfg), run=run_options(a))
-    print(markdown_table(joint))
-    if len(a.matcher) > 1:
-        from pin_match.evaluation.compare import compare_bench
-
-        print("paired comparisons:", *compare_bench(a.out, a.frameset), sep="\n  ")
-    print(f"-> {write_index(a.out, {'bench': joint}, {'bench': f'{a.frameset}, val split'})}")
+    done = bench(a.frameset, bench_overrides(a.cfg, a.matcher), a.out, objective=a.objective,
+                 sigma_from=a.sigma_from, run=run_options(a))
+    print(markdown_table(done.joint))
+    comparisons = compare_bench(done.run)
+    if comparisons:
+        print("paired comparisons:", *(c.folder.page for c in comparisons), sep="\n  ")
+    print(f"-> {write_index(a.out, [SetResults('bench', f'{a.frameset}, val split', done, comparisons)])}")
 
 
 def _cmd_demo(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.bench import LOOKALIKE_MATCHERS, OFFLINE_MATCHERS, Stopwatch, demo
-    from pin_match.evaluation.index_page import write_index
+    from dataclasses import replace
+
+    from pin_match.evaluation.bench import Stopwatch
+    from pin_match.evaluation.demo import DEMO_SETS, demo
     from pin_match.evaluation.tables import markdown_table
 
+    first, *rest = DEMO_SETS
+    sets = [replace(first, matchers=tuple(a.matcher or first.matchers))]
+    if not a.no_lookalikes:
+        sets += [replace(s, matchers=tuple(a.lookalike_matcher or s.matchers)) for s in rest]
     watch = Stopwatch()
-    real = () if a.no_lookalikes else (a.lookalike_matcher or LOOKALIKE_MATCHERS)
-    tables, out = demo(a.out, a.matcher or OFFLINE_MATCHERS, lookalike_matchers=real, seed=a.seed,
-                       run=run_options(a), watch=watch)
-    captions = {"synthetic": "the synthetic val split (rendered PIN-like rooms)",
-                "look-alikes": "real photos: val instances of CORe50 objects pasted into real rooms, each target "
-                               "among real look-alikes of its category (AUROC-same: target vs look-alike frames)"}
-    for name, joint in tables.items():
-        print(f"\nPIN detection metrics on {captions[name]}; 'sigma from': where each sigma came from:\n")
-        print(markdown_table(joint))
-    print(f"\nreports, plots, thresholds and score tables: {out}")
+    results = demo(a.out, sets, seed=a.seed, run=run_options(a), watch=watch)
+    for r in results:
+        print(f"\nPIN detection metrics on {r.caption}; {r.bench.caption}\n")
+        print(markdown_table(r.bench.joint))
+    print(f"\nreports, plots, thresholds and score tables: {a.out}")
     print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")
-    print(f"\nevery report and both tables, one page: {write_index(out, tables, captions)}")
+    print(f"\nthe story, every table and a link to every page: {Path(a.out) / 'index.html'}")
 
 
 def _table_arguments(s: argparse.ArgumentParser) -> None:
@@ -139,7 +143,7 @@ def _table_arguments(s: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.bench import DEMO_OUT
+    from pin_match.evaluation.demo import DEMO_OUT, DEMO_SETS
     from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
     objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
@@ -190,12 +194,13 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_bench)
 
-    s = sub.add_parser("demo", help="the whole job on the synthetic default frame-set (generated if absent)")
+    synthetic, real = DEMO_SETS[0], DEMO_SETS[1]
+    s = sub.add_parser("demo", help="the whole job on a synthetic and a real look-alike frame-set (built if absent)")
     s.add_argument("--matcher", action="append",
-                   help="matcher for the synthetic set (repeatable; default color, xfeat)")
+                   help=f"matcher for the {synthetic.name} set (repeatable; default {', '.join(synthetic.matchers)})")
     s.add_argument("--lookalike-matcher", action="append",
-                   help="matcher for the real look-alike set (repeatable; default effnet, verify, color)")
-    s.add_argument("--no-lookalikes", action="store_true", help="the synthetic set only")
+                   help=f"matcher for the {real.name} set (repeatable; default {', '.join(real.matchers)})")
+    s.add_argument("--no-lookalikes", action="store_true", help=f"the {synthetic.name} set only")
     s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
     s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")
     add_run_options(s, workers=WORKERS_HELP)

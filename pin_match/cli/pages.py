@@ -24,7 +24,9 @@ def _cmd_inspect(a: argparse.Namespace) -> None:
 
 
 def _cmd_compare(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.compare import compare
+    from pin_match.evaluation.compare import AtSigma, compare
+    from pin_match.evaluation.evaluator import EvalContext
+    from pin_match.evaluation.metrics import Bootstrap
     from pin_match.evaluation.sigma import resolve_sigma
     from pin_match.evaluation.tables import markdown_table
     from pin_match.scoring.cache import find_score_table
@@ -32,19 +34,15 @@ def _cmd_compare(a: argparse.Namespace) -> None:
 
     if len(a.matcher) != 2 or len(a.threshold or [None, None]) != 2:
         raise CompareUsageError("name two matchers (--matcher A --matcher B) and, if any, two --threshold values")
-    overrides = bench_overrides(a.cfg)
-    stray = sorted(set(overrides) - set(a.matcher))
-    if stray:
-        raise CompareUsageError(f"--cfg for {', '.join(stray)}, which is not among the compared matchers "
-                                f"({', '.join(a.matcher)}): fix the name before ':'")
+    overrides = bench_overrides(a.cfg, a.matcher, "compared")
     fs = FrameSet.load(a.frameset)
-    tables = [ScoreTable.read(find_score_table(a.cache, fs, name, overrides.get(name))) for name in a.matcher]
-    sigmas = [resolve_sigma(t.matcher_id, t.meta.get("default_sigma"), s, a.thresholds)
-              for t, s in zip(tables, a.threshold or [None, None])]
+    tables = [ScoreTable.read(find_score_table(a.cache, fs, name, overrides[name] or None)) for name in a.matcher]
+    sides = [AtSigma(t, resolve_sigma(t.matcher_id, t.meta.get("default_sigma"), s, a.thresholds))
+             for t, s in zip(tables, a.threshold or [None, None])]
     out = a.out or outputs.RUNS / "compare" / f"{a.matcher[0]}_vs_{a.matcher[1]}" / str(a.split)
-    paired, _ = compare(*tables, fs, *sigmas, out, split=a.split, n_boot=a.bootstrap)
-    print(markdown_table(paired.round(3)))
-    print(f"-> {out / 'compare.html'}")
+    done = compare(*sides, EvalContext(fs, Bootstrap(n_boot=a.bootstrap)), out, split=a.split)
+    print(markdown_table(done.paired.round(3)))
+    print(f"-> {done.folder.page}")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:

@@ -1,7 +1,7 @@
 """Load a finished bench folder (what ``bench`` / ``pin-match demo`` wrote) for analysis, e.g. the notebooks.
 
-A bench folder holds ``scores/<matcher@hash>/<fingerprint>/scores_all.parquet``,
-``thresholds/<matcher>.json`` and ``reports/<matcher>/metrics.json``; ``load_bench`` finds
+A bench folder (``layout.BenchLayout``) holds the score cache, the tuned thresholds and a report
+per matcher; ``load_bench`` finds
 each matcher's score table through its report (matcher id and frame-set fingerprint), so
 a stale table of another config or frame-set in the same folder is never picked up.
 """
@@ -16,7 +16,8 @@ import pandas as pd
 
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.layout import BenchLayout
 from pin_match.evaluation.tables import report_row, side_by_side
 from pin_match.scoring.cache import cache_dir
 from pin_match.scoring.table import ScoreTable
@@ -28,13 +29,25 @@ class AnalysisError(PinMatchError, ValueError):
 
 @dataclass
 class BenchRun:
-    root: Path
-    frameset: FrameSet
-    labels: pd.DataFrame                 # frame_labels(frameset)
+    layout: BenchLayout
+    context: EvalContext                 # the frame-set and its labels
     tables: dict[str, ScoreTable]        # by matcher name, in the order of the reports
     sigmas: dict[str, float]             # the sigma each matcher was reported at (source: its report)
     reports: dict[str, dict]             # reports/<matcher>/metrics.json
     tuned: dict[str, dict]               # thresholds/<matcher>.json (absent unless bench tuned sigma)
+
+    @property
+    def root(self) -> Path:
+        return self.layout.root
+
+    @property
+    def frameset(self) -> FrameSet:
+        return self.context.fs
+
+    @property
+    def labels(self) -> pd.DataFrame:
+        """``frame_labels(frameset)``, built once."""
+        return self.context.labels
 
     @property
     def matchers(self) -> list[str]:
@@ -42,24 +55,26 @@ class BenchRun:
 
     def scored(self, matcher: str, split: str | None = None) -> pd.DataFrame:
         """The frame labels of the scored frames with their score (one split, or all for None / "all")."""
-        scored = scored_frames(self.labels, self.tables[matcher])
-        if split not in (None, "all"):
-            scored = scored[scored.split == split].reset_index(drop=True)
-        return scored
+        return self.context.scored(self.tables[matcher], split)
 
     def table(self) -> pd.DataFrame:
         """The side-by-side table of the reports (rows = matchers), as ``bench`` wrote it."""
         return side_by_side([report_row(r) for r in self.reports.values()])
 
 
-def load_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = None) -> BenchRun:
-    """Every matcher reported under ``run_dir`` with its score table and sigma (frame-set default: run_dir/frameset)."""
-    root = Path(run_dir)
-    fs_arg = root / "frameset" if frameset is None else frameset
-    fs = fs_arg if isinstance(fs_arg, FrameSet) else FrameSet.load(fs_arg)
-    report_files = sorted((root / "reports").glob("*/metrics.json"))
+def load_bench(run_dir: str | Path | BenchLayout,
+               frameset: FrameSet | str | Path | EvalContext | None = None) -> BenchRun:
+    """Every matcher reported under ``run_dir`` with its score table and sigma (frame-set default: run_dir/frameset).
+
+    ``frameset`` may be the run's ``EvalContext``, whose labels are then reused.
+    """
+    layout = run_dir if isinstance(run_dir, BenchLayout) else BenchLayout(Path(run_dir))
+    ctx = EvalContext.of(layout.frameset if frameset is None else frameset)
+    fs = ctx.fs
+    report_files = layout.report_metrics()
     if not report_files:
-        raise AnalysisError(f"no reports under {root / 'reports'}: run `pin-match bench` or `pin-match demo` first")
+        raise AnalysisError(f"no reports under {layout.root / 'reports'}: run `pin-match bench` or "
+                            "`pin-match demo` first")
     tables, sigmas, reports, tuned = {}, {}, {}, {}
     for path in report_files:
         report = json.loads(path.read_text(encoding="utf-8"))
@@ -67,13 +82,13 @@ def load_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = Non
         if report.get("frameset_fingerprint") != fs.fingerprint:
             raise AnalysisError(f"{path} reports frame-set {report.get('frameset_fingerprint')}, "
                                 f"not {fs.root} ({fs.fingerprint})")
-        folder = cache_dir(root / "scores", matcher_id, fs.fingerprint)
+        folder = cache_dir(layout.scores, matcher_id, fs.fingerprint)
         if not folder.is_dir():
             raise AnalysisError(f"{path} reports {matcher_id}, but there is no score table under {folder}")
         tables[name] = ScoreTable.read(folder)
         sigmas[name] = float(report["sigma"])  # where it came from: report["sigma_source"]
-        threshold_file = root / "thresholds" / f"{name}.json"
+        threshold_file = layout.thresholds(name)
         if threshold_file.exists():
             tuned[name] = json.loads(threshold_file.read_text(encoding="utf-8"))
         reports[name] = report
-    return BenchRun(root, fs, frame_labels(fs), tables, sigmas, reports, tuned)
+    return BenchRun(layout, ctx, tables, sigmas, reports, tuned)

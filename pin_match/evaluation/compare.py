@@ -1,74 +1,89 @@
 """Two matchers on the same frames and split: the paired table, McNemar's test, and the page of their disagreements.
 
-Writes ``compare.csv``, ``compare.md`` and ``compare.html`` (images in ``compare_files/``)
-into one folder; the numbers come from ``paired``, the pictures from ``gallery``.
+Writes a ``layout.CompareFolder``: ``compare.csv``, ``compare.md`` and ``compare.html`` (images
+in ``compare_files/``); the numbers come from ``paired``, the pictures from ``pictures``.
 """
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import pandas as pd
 
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation import html
-from pin_match.evaluation.evaluator import split_frames
-from pin_match.evaluation.gallery import draw_frame, frame_points, frame_roles, thumbnail
-from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.gallery import frame_roles
+from pin_match.evaluation.layout import CompareFolder
 from pin_match.evaluation.paired import disagreements, first_match_outcomes, mcnemar, paired_comparison
+from pin_match.evaluation.pictures import legend, scored_frame_image
 from pin_match.evaluation.sigma import SigmaChoice
 from pin_match.evaluation.tables import markdown_table
 from pin_match.scoring.table import ScoreTable
 
-FILES = ("compare.csv", "compare.md", "compare.html")
+if TYPE_CHECKING:
+    from pin_match.evaluation.analysis import BenchRun
+
+COMPARE_THUMB = 240
+ASSETS = "compare_files"
 
 
-def compare(table_a: ScoreTable, table_b: ScoreTable, fs: FrameSet, sigma_a: SigmaChoice, sigma_b: SigmaChoice,
-            out_dir: str | Path, *, split: str | None = "val", labels: pd.DataFrame | None = None,
-            n_boot: int = 1000, seed: int = 0, cap: int = 12) -> tuple[pd.DataFrame, dict]:
-    """Write the comparison folder; returns the paired table (rows = metrics) and McNemar's result.
+@dataclass(frozen=True)
+class AtSigma:
+    """One side of a comparison: a matcher's score table and the sigma (with its provenance) it is judged at."""
 
-    ``labels``: ``frame_labels(fs)`` when the caller already has them (built here once otherwise).
-    """
-    names = (table_a.matcher_id, table_b.matcher_id)
-    labels = frame_labels(fs) if labels is None else labels
-    scored_a, scored_b = (split_frames(t, fs, split, labels) for t in (table_a, table_b))
-    clusters = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id))
-    paired = paired_comparison(scored_a, scored_b, sigma_a.value, sigma_b.value, clusters=clusters, names=names,
-                               n_boot=n_boot, seed=seed)
-    test = mcnemar(*first_match_outcomes(scored_a, scored_b, sigma_a.value, sigma_b.value))
-    out = Path(out_dir)
-    atomic.write_text(out / FILES[0], paired.to_csv())
-    summary = summary_lines(paired, test, names, sigma_a, sigma_b, split)
-    atomic.write_text(out / FILES[1], "\n\n".join([f"# {names[1]} vs {names[0]}", *summary,
+    table: ScoreTable
+    sigma: SigmaChoice
+
+
+@dataclass(frozen=True)
+class Comparison:
+    """What ``compare`` wrote: B against A on one split."""
+
+    names: tuple[str, str]   # matcher ids of A and B
+    paired: pd.DataFrame     # rows = metrics: A, B, B - A and its interval
+    test: dict               # McNemar on "the first match is the target"
+    summary: list[str]       # the sentences above the table, as on the page
+    folder: CompareFolder
+
+
+def compare(a: AtSigma, b: AtSigma, data: FrameSet | EvalContext, out: str | Path | CompareFolder, *,
+            split: str | None = "val", cap: int = 12) -> Comparison:
+    """Write the comparison folder (differences are B minus A); ``data``: the frame-set or the run's context."""
+    ctx = EvalContext.of(data)
+    folder = out if isinstance(out, CompareFolder) else CompareFolder(Path(out))
+    names = (a.table.matcher_id, b.table.matcher_id)
+    scored_a, scored_b = (ctx.scored(side.table, split) for side in (a, b))
+    clusters = dict(zip(ctx.fs.episodes.episode_id, ctx.fs.episodes.target_object_id))
+    paired = paired_comparison(scored_a, scored_b, a.sigma.value, b.sigma.value, clusters=clusters, names=names,
+                               boot=ctx.boot)
+    test = mcnemar(*first_match_outcomes(scored_a, scored_b, a.sigma.value, b.sigma.value))
+    atomic.write_text(folder.csv, paired.to_csv())
+    summary = summary_lines(paired, test, names, (a.sigma, b.sigma), split)
+    atomic.write_text(folder.markdown, "\n\n".join([f"# {names[1]} vs {names[0]}", *summary,
                                                    markdown_table(paired.round(3))]) + "\n")
-    gaps = disagreements(scored_a, scored_b, sigma_a.value, sigma_b.value, cap)
-    write_compare_page(out / FILES[2], fs, (table_a, table_b), (sigma_a.value, sigma_b.value), paired, summary, gaps)
-    return paired, test
+    gaps = disagreements(scored_a, scored_b, a.sigma.value, b.sigma.value, cap)
+    comparison = Comparison(names, paired, test, summary, folder)
+    write_compare_page(comparison, ctx.fs, (a, b), gaps)
+    return comparison
 
 
-def compare_bench(run_dir: str | Path, frameset: FrameSet | str | Path | None = None, split: str = "val",
-                  n_boot: int = 1000) -> list[Path]:
-    """Every matcher of a bench folder against the first, into ``run_dir/compare/<B>_vs_<A>/``; the pages."""
-    from pin_match.evaluation.analysis import load_bench
-
-    run = load_bench(run_dir, frameset)
+def compare_bench(run: BenchRun, split: str = "val") -> list[Comparison]:
+    """Every matcher of a loaded bench folder against the first, into its layout's compare folders."""
     first, *others = run.matchers
-    choice = {m: SigmaChoice(run.sigmas[m], run.reports[m]["sigma_source"], run.reports[m]["sigma_detail"])
-              for m in run.matchers}
-    pages = []
-    for other in others:
-        out = Path(run_dir) / "compare" / f"{other}_vs_{first}"
-        compare(run.tables[first], run.tables[other], run.frameset, choice[first], choice[other], out, split=split,
-                labels=run.labels, n_boot=n_boot)
-        pages.append(out / FILES[2])
-    return pages
+    side = {m: AtSigma(run.tables[m], SigmaChoice(run.sigmas[m], run.reports[m]["sigma_source"],
+                                                  run.reports[m]["sigma_detail"])) for m in run.matchers}
+    return [compare(side[first], side[other], run.context, run.layout.compare(first, other), split=split)
+            for other in others]
 
 
-def summary_lines(paired: pd.DataFrame, test: dict, names: tuple[str, str], sigma_a: SigmaChoice,
-                  sigma_b: SigmaChoice, split: str | None) -> list[str]:
+def summary_lines(paired: pd.DataFrame, test: dict, names: tuple[str, str], sigmas: tuple[SigmaChoice, SigmaChoice],
+                  split: str | None) -> list[str]:
     a = paired.attrs
+    sigma_a, sigma_b = sigmas
     return [f"Split {split or 'all'}; {names[0]} at sigma {sigma_a.value:g} ({sigma_a.source}), {names[1]} at sigma "
             f"{sigma_b.value:g} ({sigma_b.source}).",
             f"Differences are {names[1]} minus {names[0]} on the same {a['n_episodes']} episodes; "
@@ -79,27 +94,23 @@ def summary_lines(paired: pd.DataFrame, test: dict, names: tuple[str, str], sigm
             f"p = {test['p_value']:.3g}."]
 
 
-def drawn(fs: FrameSet, table: ScoreTable, frame_id: str, sigma: float, assets: html.Assets) -> str:
-    """The frame with one matcher's points at its sigma, as an image tag."""
-    src = assets.add((table.matcher_id, frame_id),
-                     lambda: thumbnail(draw_frame(fs, frame_id, frame_points(table, frame_id, sigma)), 240))
-    return html.image(src, f"{frame_id} with the points of {table.matcher_id}")
-
-
-def write_compare_page(path: Path, fs: FrameSet, tables: tuple[ScoreTable, ScoreTable], sigmas: tuple[float, float],
-                       paired: pd.DataFrame, summary: list[str], gaps: pd.DataFrame) -> Path:
-    assets = html.Assets(path, "compare_files")
+def write_compare_page(comparison: Comparison, fs: FrameSet, sides: tuple[AtSigma, AtSigma],
+                       gaps: pd.DataFrame) -> Path:
+    path = comparison.folder.page
+    assets = html.Assets(path, ASSETS)
     gaps = gaps.assign(role=frame_roles(gaps))
+    names = comparison.names
     figures = []
     for _, f in gaps.iterrows():
-        images = [drawn(fs, t, f.frame_id, s, assets) for t, s in zip(tables, sigmas)]
+        images = [scored_frame_image(assets, fs, s.table, f.frame_id, s.sigma.value, box=COMPARE_THUMB)
+                  for s in sides]
         lines = [f"frame {f.frame_id} ({f.role}), episode {f.episode_id}",
-                 *(f"{t.matcher_id}: score {score:.4g} ({'above' if score >= s else 'below'} sigma)"
-                   for t, s, score in zip(tables, sigmas, (f.score_a, f.score_b)))]
+                 *(f"{name}: score {score:.4g} ({'above' if score >= s.sigma.value else 'below'} sigma)"
+                   for name, s, score in zip(names, sides, (f.score_a, f.score_b)))]
         figures.append(html.figure(images, lines))
-    parts = [*(html.paragraph(line) for line in summary), html.table(paired.round(3)),
+    parts = [*(html.paragraph(line) for line in comparison.summary), html.table(comparison.paired.round(3)),
              html.heading("Frames where the two disagree most"),
              html.paragraph(f"One matcher accepts the frame at its sigma and the other rejects it, the largest gap "
-                            f"in score percentile first; left {tables[0].matcher_id}, right {tables[1].matcher_id}; "
-                            f"{len(gaps)} shown (capped).", "note"), html.gallery(figures)]
-    return html.write_page(path, f"{tables[1].matcher_id} vs {tables[0].matcher_id}", parts)
+                            f"in score percentile first; left {names[0]}, right {names[1]}; "
+                            f"{len(gaps)} shown (capped).", "note"), legend(), html.gallery(figures)]
+    return html.write_page(path, f"{names[1]} vs {names[0]}", parts)

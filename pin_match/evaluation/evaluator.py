@@ -2,14 +2,18 @@
 
 ``check_frameset`` is the single test that scores and frame-set belong together; ``tune``,
 ``evaluate`` and the CLI all call it, so a table is never read against another frame-set's
-labels. A caller that evaluates several tables of one frame-set (``bench``) builds its
-``frame_labels`` once and passes them in; one split's scored frames become ``FrameArrays``
-once, and every metric of that split reads them.
+labels. An ``EvalContext`` is what every step of a run reads: the frame-set, its labels (built
+once), each table's scored split (converted to ``FrameArrays`` once) and the bootstrap options.
+``bench``, ``report``, ``tune`` and ``compare`` take it where they take a frame-set, so a bench
+of several matchers builds the labels once without threading them through every call.
 """
 
 from __future__ import annotations
 
 import datetime as dt
+from dataclasses import dataclass
+from functools import cached_property
+from pathlib import Path
 
 import pandas as pd
 
@@ -17,6 +21,8 @@ from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.labels import frame_labels, localisation_hits, scored_frames
 from pin_match.evaluation.metrics import (
+    DEFAULT_BOOT,
+    Bootstrap,
     FrameArrays,
     bootstrap_ci,
     detection_metrics,
@@ -40,37 +46,81 @@ def check_frameset(table: ScoreTable, fs: FrameSet) -> None:
                               f"not on {fs.root} ({fs.fingerprint}): pass the frame-set it was scored on")
 
 
-def split_frames(table: ScoreTable, fs: FrameSet, split: str | None,
-                 labels: pd.DataFrame | None = None) -> pd.DataFrame:
-    """The frame labels of one split's scored frames with their score; a missing split says how to go on.
+class EvalContext:
+    """One frame-set as every evaluation step of a run reads it: labels built once, each scored split once.
 
-    ``labels``: ``frame_labels(fs)`` when the caller already has them (built here otherwise).
+    ``boot`` resamples every interval the run computes.
     """
-    check_frameset(table, fs)
-    scored = scored_frames(frame_labels(fs) if labels is None else labels, table)
-    if split not in (None, "all"):
-        scored = scored[scored.split == split].reset_index(drop=True)
-    if scored.empty:
-        raise EvaluationError(way_out(table.matcher_id, str(split), sorted(set(table.frames.split))))
-    return scored
+
+    def __init__(self, fs: FrameSet, boot: Bootstrap = DEFAULT_BOOT) -> None:
+        self.fs = fs
+        self.boot = boot
+        self._scored: dict[tuple[int, str | None], tuple[ScoreTable, pd.DataFrame, FrameArrays]] = {}
+
+    @classmethod
+    def of(cls, data: FrameSet | str | Path | EvalContext) -> EvalContext:
+        """``data`` itself when it is a context, else a new one (default options) of the frame-set or its folder."""
+        if isinstance(data, EvalContext):
+            return data
+        return cls(data if isinstance(data, FrameSet) else FrameSet.load(data))
+
+    @cached_property
+    def labels(self) -> pd.DataFrame:
+        """``frame_labels`` of the frame-set."""
+        return frame_labels(self.fs)
+
+    def scored(self, table: ScoreTable, split: str | None) -> pd.DataFrame:
+        """The frame labels of one split's scored frames with their score; a missing split says how to go on."""
+        return self._split(table, split)[1]
+
+    def arrays(self, table: ScoreTable, split: str | None) -> FrameArrays:
+        """``scored`` as the arrays every metric reads."""
+        return self._split(table, split)[2]
+
+    def _split(self, table: ScoreTable, split: str | None) -> tuple[ScoreTable, pd.DataFrame, FrameArrays]:
+        key = (id(table), None if split in (None, "all") else split)
+        if key not in self._scored:  # the table is kept with its entry, so its id is never reused while cached
+            check_frameset(table, self.fs)
+            scored = scored_frames(self.labels, table)
+            if key[1] is not None:
+                scored = scored[scored.split == split].reset_index(drop=True)
+            if scored.empty:
+                raise EvaluationError(way_out(table.matcher_id, str(split), sorted(set(table.frames.split))))
+            self._scored[key] = (table, scored, frame_arrays(scored))
+        return self._scored[key]
 
 
-def evaluate(table: ScoreTable, fs: FrameSet, sigma: SigmaChoice, split: str | None = "val", *,
-             labels: pd.DataFrame | None = None, n_boot: int = 1000,
-             seed: int = 0) -> tuple[dict, pd.DataFrame, pd.DataFrame, FrameArrays]:
-    """Metrics (with CIs and localisation), the per-category table, and one split's scored frames as a table
-    (the report page's galleries need its ids and visibility) and as the arrays the metrics and plots use."""
-    scored = split_frames(table, fs, split, labels)
-    arr = frame_arrays(scored)
+def split_frames(table: ScoreTable, data: FrameSet | EvalContext, split: str | None) -> pd.DataFrame:
+    """The frame labels of one split's scored frames with their score (``EvalContext.scored``)."""
+    return EvalContext.of(data).scored(table, split)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One matcher on one split at one sigma: metrics.json's content, the per-category table, and the split's
+    scored frames as a table (the report page's galleries need its ids and visibility) and as arrays."""
+
+    result: dict
+    per_category: pd.DataFrame
+    frames: pd.DataFrame
+    arrays: FrameArrays
+
+
+def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice,
+             split: str | None = "val") -> Evaluation:
+    """Metrics (with CIs and localisation) and the per-category table of one split at one sigma."""
+    ctx = EvalContext.of(data)
+    scored, arr = ctx.scored(table, split), ctx.arrays(table, split)
     metrics = detection_metrics(arr, sigma.value)
-    hits = localisation_hits(fs, table_subset(table, scored.frame_id), sigma.value)
+    hits = localisation_hits(ctx.fs, table_subset(table, scored.frame_id), sigma.value)
     metrics.update(localisation_metrics(hits))
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
-                  modality=table.meta.get("modality"), frameset_fingerprint=fs.fingerprint, split=split or "all",
+                  modality=table.meta.get("modality"), frameset_fingerprint=ctx.fs.fingerprint, split=split or "all",
                   **sigma.as_dict(), metrics=metrics,
-                  ci95=bootstrap_ci(arr, sigma.value, n_boot=n_boot, seed=seed), n_bootstrap=n_boot,
+                  ci95=bootstrap_ci(arr, sigma.value, n_boot=ctx.boot.n_boot, seed=ctx.boot.seed, level=ctx.boot.level),
+                  n_bootstrap=ctx.boot.n_boot,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
-    return result, per_category(arr, sigma.value), scored, arr
+    return Evaluation(result, per_category(arr, sigma.value), scored, arr)
 
 
 def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:

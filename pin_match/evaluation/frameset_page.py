@@ -12,11 +12,13 @@ from pathlib import Path
 
 import numpy as np
 import pandas as pd
+from markupsafe import Markup
 
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation import html
-from pin_match.evaluation.gallery import ROLE_NAMES, draw_frame, frame_roles, on_checkerboard, thumbnail
+from pin_match.evaluation.gallery import ROLE_NAMES, frame_roles
 from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.pictures import frame_image, legend, reference_images
 
 PAGE = "index.html"
 ASSETS = "inspect_files"
@@ -53,7 +55,7 @@ def counts(fs: FrameSet) -> pd.DataFrame:
     return table.rename_axis("split / category")
 
 
-def object_figures(fs: FrameSet, assets: html.Assets) -> tuple[list[str], int]:
+def object_figures(fs: FrameSet, assets: html.Assets) -> tuple[list[Markup], int]:
     """One figure per object (capped at ``MAX_OBJECTS``) and how many objects have a visible problem."""
     uses = fs.episodes.target_object_id.value_counts()
     figures, n_bad = [], 0
@@ -63,15 +65,13 @@ def object_figures(fs: FrameSet, assets: html.Assets) -> tuple[list[str], int]:
         n_bad += bool(problems)
         if len(figures) >= MAX_OBJECTS:
             continue
-        images = [html.image(assets.add(("ref", obj.object_id, k), lambda v=view: on_checkerboard(v), ".png"),
-                             f"view {k} of {obj.object_id}") for k, view in enumerate(target.views)]
         lines = [f"{obj.object_id} ({obj.category}, {obj.split})",
                  f"target of {int(uses.get(obj.object_id, 0))} episodes", *problems]
-        figures.append(html.figure(images, lines, "miss" if problems else None))
+        figures.append(html.figure(reference_images(assets, target), lines, "miss" if problems else None))
     return figures, n_bad
 
 
-def frame_samples(fs: FrameSet, labels: pd.DataFrame, assets: html.Assets, per_role: int, seed: int) -> list[str]:
+def frame_samples(fs: FrameSet, labels: pd.DataFrame, assets: html.Assets, per_role: int, seed: int) -> list[Markup]:
     parts = []
     for role in ROLE_NAMES:
         rows = labels[labels.role == role]
@@ -79,8 +79,7 @@ def frame_samples(fs: FrameSet, labels: pd.DataFrame, assets: html.Assets, per_r
         parts.append(html.heading(f"Frames showing: {role}", 3))
         parts.append(html.paragraph(f"{len(sample)} of {len(rows)} frames, a seeded random sample.", "note"))
         parts.append(html.gallery([html.figure(
-            [html.image(assets.add(("frame", f.frame_id), lambda i=f.frame_id: thumbnail(draw_frame(fs, i))),
-                        f"frame {f.frame_id} with mask outlines")],
+            [frame_image(assets, fs, f.frame_id)],
             [f"frame {f.frame_id}", f"episode {f.episode_id} ({f.split}), step {f.step}",
              f"target category {f.target_category}"]) for _, f in sample.iterrows()]))
     return parts
@@ -103,6 +102,6 @@ def write_frameset_page(fs: FrameSet, out_dir: str | Path, *, per_role: int = FR
              html.paragraph(f"{shown}, on a checkerboard so the cut-out shows. {n_bad} objects have a visible "
                             "problem (red frame: not cut out, empty, or one image repeated).", "note"),
              html.gallery(figures), html.heading("Sample frames per role"),
-             html.paragraph("Outlines: green target, red same-category look-alike, blue other object.", "note"),
+             legend(points=False),
              *frame_samples(fs, labels, assets, per_role, seed)]
     return html.write_page(path, f"Frame-set {fs.manifest.get('name', '') or fs.root}", parts)

@@ -48,8 +48,7 @@ def sections(scored: pd.DataFrame, sigma: float, cap: int = DEFAULT_CAP) -> list
     scored = scored.assign(role=frame_roles(scored))
     negatives = scored[scored.role != "target"].sort_values(["score", "frame_id"], ascending=[False, True])
     targets = scored[scored.role == "target"].sort_values(["score", "frame_id"])
-    above = scored[scored.score >= sigma].sort_values(["episode_id", "step"])
-    first = above.drop_duplicates("episode_id")
+    first = first_matches(scored, sigma)
     return [
         Section("false_alarms", "Highest-scoring frames without the target (false alarms)",
                 "frames where the target is not visible, highest score first", negatives.head(cap), len(negatives)),
@@ -58,6 +57,12 @@ def sections(scored: pd.DataFrame, sigma: float, cap: int = DEFAULT_CAP) -> list
         Section("first_match", "Each episode's first frame above sigma",
                 "where the agent would stop at today's rule: was it the target?", first.head(cap), len(first)),
     ]
+
+
+def first_matches(scored: pd.DataFrame, sigma: float) -> pd.DataFrame:
+    """Each episode's first frame at or above sigma (where PIN's agent would stop), in episode order."""
+    above = scored[scored.score >= sigma].sort_values(["episode_id", "step"])
+    return above.drop_duplicates("episode_id")
 
 
 def outline(image: np.ndarray, region: np.ndarray, rgb: tuple[int, int, int], thickness: int = 2) -> None:

@@ -1,21 +1,25 @@
 """Static HTML pieces shared by every page pin_match writes (report, inspect, compare, index).
 
 A page is plain HTML with its images as small files in a folder beside it, so the folder
-can be copied, zipped or opened offline: no script, no server, no network. Every piece
-escapes its text; numbers go through ``tables.format_value``, so "n/a" means the same here
-as in the Markdown and LaTeX tables.
+can be copied, zipped or opened offline: no script, no server, no network. Escaping holds by
+construction: every piece returns ``Markup`` (markupsafe's, the type Jinja2 uses), text and
+attribute values enter only through ``Markup.format`` or ``escape``, and ``page`` escapes any
+part that is a plain ``str``; a link or image path is also URL-quoted (``url``), so a name with
+``#``, ``?``, ``%``, a space or a non-ASCII letter still points at its file. Numbers go through
+``tables.format_value``, so "n/a" means the same here as in the Markdown and LaTeX tables.
 """
 
 from __future__ import annotations
 
-import html
 import os
 import shutil
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
+from urllib.parse import quote
 
 import numpy as np
 import pandas as pd
+from markupsafe import Markup, escape
 
 from pin_match import atomic
 from pin_match.evaluation.tables import text_rows
@@ -37,59 +41,76 @@ figcaption { font-size: 0.8em; max-width: 330px; }
 """
 
 
-def page(title: str, parts: Iterable[str]) -> str:
-    """A whole HTML document from already-escaped parts."""
-    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n<title>{html.escape(title)}</title>\n'
-            f"<style>{STYLE}</style>\n</head>\n<body>\n<h1>{html.escape(title)}</h1>\n" + "\n".join(parts)
-            + "\n</body>\n</html>\n")
+def page(title: str, parts: Iterable[str | Markup]) -> str:
+    """A whole HTML document; a part that is plain text (not ``Markup``) is escaped."""
+    body = Markup("\n").join(escape(p) for p in parts)
+    return Markup('<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n<title>{}</title>\n'
+                  "<style>{}</style>\n</head>\n<body>\n<h1>{}</h1>\n{}\n</body>\n</html>\n"
+                  ).format(title, Markup(STYLE), title, body)
 
 
-def heading(text: str, level: int = 2, anchor: str | None = None) -> str:
-    ident = f' id="{html.escape(anchor)}"' if anchor else ""
-    return f"<h{level}{ident}>{html.escape(text)}</h{level}>"
+def url(path: str) -> str:
+    """A relative link with every character that means something in a URL quoted ("/" kept as the separator)."""
+    return quote(path, safe="/")
 
 
-def paragraph(text: str, cls: str | None = None) -> str:
-    attr = f' class="{cls}"' if cls else ""
-    return f"<p{attr}>{html.escape(text)}</p>"
+def join(parts: Iterable[str | Markup]) -> Markup:
+    return Markup("").join(escape(p) for p in parts)
 
 
-def link(href: str, text: str) -> str:
-    return f'<a href="{html.escape(href)}">{html.escape(text)}</a>'
+def heading(text: str, level: int = 2, anchor: str | None = None) -> Markup:
+    ident = Markup(' id="{}"').format(anchor) if anchor else ""
+    return Markup("<h{}{}>{}</h{}>").format(level, ident, text, level)
 
 
-def definitions(pairs: Sequence[tuple[str, object]]) -> str:
+def paragraph(text: str | Markup, cls: str | None = None) -> Markup:
+    attr = Markup(' class="{}"').format(cls) if cls else ""
+    return Markup("<p{}>{}</p>").format(attr, text)
+
+
+def link(href: str, text: str) -> Markup:
+    """A link to a relative path (quoted here: pass the path as it is on disk)."""
+    return Markup('<a href="{}">{}</a>').format(url(href), text)
+
+
+def bullets(items: Iterable[str | Markup]) -> Markup:
+    return Markup("<ul>{}</ul>").format(join(Markup("<li>{}</li>").format(i) for i in items))
+
+
+def definitions(pairs: Sequence[tuple[str, object]]) -> Markup:
     """A header block of name / value lines."""
-    items = "".join(f"<dt>{html.escape(k)}</dt><dd>{html.escape(str(v))}</dd>" for k, v in pairs)
-    return f"<dl>{items}</dl>"
+    return Markup("<dl>{}</dl>").format(join(Markup("<dt>{}</dt><dd>{}</dd>").format(k, str(v)) for k, v in pairs))
 
 
-def table(df: pd.DataFrame, caption: str = "") -> str:
+def table(df: pd.DataFrame, caption: str = "") -> Markup:
     """A DataFrame as an HTML table, cells formatted like the Markdown tables (undefined: "n/a")."""
-    cap = f"<caption>{html.escape(caption)}</caption>" if caption else ""
-    head = "".join(f"<th>{html.escape(str(c))}</th>" for c in [df.index.name or "", *df.columns])
-    body = "".join("<tr>" + "".join(f"<td>{html.escape(c)}</td>" for c in row) + "</tr>" for row in text_rows(df))
-    return f"<table>{cap}<thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>"
+    cap = Markup("<caption>{}</caption>").format(caption) if caption else ""
+    head = join(Markup("<th>{}</th>").format(str(c)) for c in [df.index.name or "", *df.columns])
+    body = join(Markup("<tr>{}</tr>").format(join(Markup("<td>{}</td>").format(c) for c in row))
+                for row in text_rows(df))
+    return Markup("<table>{}<thead><tr>{}</tr></thead><tbody>{}</tbody></table>").format(cap, head, body)
 
 
-def image(src: str, alt: str, width: int | None = None) -> str:
-    size = f' width="{width}"' if width else ""
-    return f'<img src="{html.escape(src)}" alt="{html.escape(alt)}"{size}>'
+def image(src: str, alt: str, width: int | None = None) -> Markup:
+    """An image from a relative path (quoted here: pass the path as it is on disk)."""
+    size = Markup(' width="{}"').format(int(width)) if width else ""
+    return Markup('<img src="{}" alt="{}"{}>').format(url(src), alt, size)
 
 
-def figure(images: Sequence[str], caption_lines: Sequence[str], cls: str | None = None) -> str:
+def figure(images: Sequence[Markup], caption_lines: Sequence[str], cls: str | None = None) -> Markup:
     """Images side by side over a caption of several short lines."""
-    attr = f' class="{cls}"' if cls else ""
-    caption = "<br>".join(html.escape(line) for line in caption_lines)
-    return f"<figure{attr}>{''.join(images)}<figcaption>{caption}</figcaption></figure>"
+    attr = Markup(' class="{}"').format(cls) if cls else ""
+    caption = Markup("<br>").join(escape(line) for line in caption_lines)
+    return Markup("<figure{}>{}<figcaption>{}</figcaption></figure>").format(attr, join(images), caption)
 
 
-def gallery(figures: Sequence[str]) -> str:
-    return f'<div class="gallery">{"".join(figures)}</div>' if figures else paragraph("(none)", "note")
+def gallery(figures: Sequence[Markup]) -> Markup:
+    return Markup('<div class="gallery">{}</div>').format(join(figures)) if figures else paragraph("(none)", "note")
 
 
-def swatch(rgb: tuple[int, int, int], label: str) -> str:
-    return (f'<span class="swatch" style="background: rgb{rgb}"></span> {html.escape(label)}')
+def swatch(rgb: tuple[int, int, int], label: str) -> Markup:
+    r, g, b = (int(c) for c in rgb)
+    return Markup('<span class="swatch" style="background: rgb({}, {}, {})"></span> {}').format(r, g, b, label)
 
 
 class Assets:
@@ -104,7 +125,7 @@ class Assets:
         self._names: dict[object, str] = {}
         shutil.rmtree(self.page_dir / folder, ignore_errors=True)
 
-    def add(self, key: object, make_rgb, suffix: str = ".jpg") -> str:
+    def add(self, key: object, make_rgb: Callable[[], np.ndarray], suffix: str = ".jpg") -> str:
         """The relative src of the image under ``key``, writing ``make_rgb()`` the first time it is asked for."""
         if key not in self._names:
             name = f"{self.folder}/{len(self._names):04d}{suffix}"

@@ -1,32 +1,127 @@
-"""``index.html`` of a bench or demo folder: its tables and a link to every report page under it."""
+"""``index.html`` of a bench or demo folder: per frame-set a plain headline, the paired comparison and pictures,
+then the table, then a link to every report and comparison page.
+
+The headline is the question a PIN agent asks of its detector: in how many episodes was the
+first frame it matched the target (``first_match_success``, with its bootstrap interval)? The
+pictures answer it by eye: per val episode the target's references, then each matcher's first
+frame above its sigma, drawn with the ground-truth outlines and the matcher's points.
+"""
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
-import pandas as pd
+from markupsafe import Markup
 
 from pin_match.evaluation import html
-from pin_match.evaluation.compare import FILES as COMPARE_FILES
-from pin_match.evaluation.report_page import PAGE as REPORT_PAGE
+from pin_match.evaluation.bench import Bench
+from pin_match.evaluation.compare import Comparison
+from pin_match.evaluation.gallery import first_matches, frame_roles
+from pin_match.evaluation.layout import BenchLayout
+from pin_match.evaluation.pictures import legend, reference_images, scored_frame_image
 
-COMPARE_PAGE = COMPARE_FILES[2]
+EPISODES_SHOWN = 6
+PICTURE_SIZE = 200
+INDEX_ASSETS = "index_files"
 
 
-def write_index(out: str | Path, tables: Mapping[str, pd.DataFrame], captions: Mapping[str, str]) -> Path:
-    """Write ``out/index.html``: each table with its caption, then links to every report and comparison page."""
-    root = Path(out)
+@dataclass(frozen=True)
+class SetResults:
+    """One frame-set's part of the page: what it is, its bench, and its matchers compared with the first."""
+
+    name: str
+    caption: str
+    bench: Bench
+    comparisons: Sequence[Comparison] = ()
+
+
+def first_match_line(result: dict) -> str:
+    """'verify: the target in 14 of 20 episodes (70.0 %, 95 % CI 50.0-85.0 %)' from a report."""
+    m, ci = result["metrics"], result["ci95"].get("first_match_success")
+    share = m.get("first_match_success")
+    interval = f", 95 % CI {ci[0]:.1f}-{ci[1]:.1f} %" if ci else ""
+    pct = "n/a" if share is None else f"{share:.1f} %"
+    return f"{result['matcher']}: the target in {m['n_first_tm']} of {m['n_episodes']} episodes ({pct}{interval})"
+
+
+def headline(results: Sequence[dict]) -> str:
+    """Which matcher's first match was the target in the most val episodes, then the others in that order."""
+    ranked = sorted(results, key=lambda r: (-(r["metrics"].get("first_match_success") or 0.0), r["matcher"]))
+    sources = sorted({r["sigma_source"] for r in ranked})
+    lines = "; ".join(first_match_line(r) for r in ranked)
+    return f"First match is the target (the frame where PIN's agent would stop): {lines}. Sigma: {', '.join(sources)}."
+
+
+def comparison_lines(c: Comparison) -> list[str]:
+    """The paired differences that decide the ranking, each with its interval, and McNemar's count."""
+    diff = f"{c.names[1]} - {c.names[0]}"
     parts = []
-    for name, joint in tables.items():
-        parts += [html.heading(name), html.paragraph(captions.get(name, "")), html.table(joint)]
-    pages = sorted(root.rglob(REPORT_PAGE), key=_outer_first) + sorted(root.rglob(COMPARE_PAGE), key=_outer_first)
-    links = "".join(f"<li>{html.link(html.relative(p, root), html.relative(p.parent, root))}</li>" for p in pages)
+    for metric in ("FM-prec", "AUROC-same", "AUROC"):
+        row = c.paired.loc[metric]
+        scale = "" if metric.startswith("AUROC") else " points"
+        parts.append(f"{metric} {row[diff]:+.3g}{scale} (95 % CI {row['CI low']:+.3g} to {row['CI high']:+.3g})")
+    t = c.test
+    return [f"{c.names[1]} against {c.names[0]}: " + "; ".join(parts) + ".",
+            f"First match the target for only {c.names[0]} in {t['only_a']} episodes, only {c.names[1]} in "
+            f"{t['only_b']} (McNemar p = {t['p_value']:.3g})."]
+
+
+def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
+    """Per val episode: the target's references, then each matcher's first frame above its sigma."""
+    run = s.bench.run
+    firsts = {}
+    for m in run.matchers:
+        first = first_matches(run.scored(m, "val"), run.sigmas[m])
+        firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
+    val = run.frameset.episodes[run.frameset.episodes.split == "val"].sort_values("episode_id").head(episodes)
+    parts = []
+    for _, ep in val.iterrows():
+        target = run.frameset.target(ep.target_object_id)
+        figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
+                                                                  f"target {target.object_id} ({target.category})"])]
+        for m in run.matchers:
+            if ep.episode_id not in firsts[m].index:
+                figures.append(html.figure([], [f"{m}: no frame above sigma {run.sigmas[m]:g}"], "miss"))
+                continue
+            f = firsts[m].loc[ep.episode_id]
+            image = scored_frame_image(assets, run.frameset, run.tables[m], f.frame_id, run.sigmas[m],
+                                       box=PICTURE_SIZE)
+            figures.append(html.figure([image], [f"{m}: first match at step {f.step}", f"shows: {f.role}",
+                                                 f"score {f.score:.3g} (sigma {run.sigmas[m]:g})"],
+                                       "hit" if f.role == "target" else "miss"))
+        parts.append(html.gallery(figures))
+    return parts
+
+
+def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
+    n_val = int((s.bench.run.frameset.episodes.split == "val").sum())
+    shown = min(n_val, EPISODES_SHOWN)
+    parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results))]
+    if s.comparisons:
+        parts += [html.heading("Paired comparison", 3),
+                  *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]
+    parts += [html.heading("Each matcher's first match", 3),
+              html.paragraph(f"{shown} of {n_val} val episodes: the target's references, then where each matcher "
+                             "first fired (green border: the target; red: anything else, or nothing).", "note"),
+              *episode_pictures(s, assets),
+              html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
+    return parts
+
+
+def write_index(out: str | Path | BenchLayout, sets: Sequence[SetResults]) -> Path:
+    """Write ``index.html`` (images in ``index_files/``): each set's story, then links to every page under it."""
+    layout = out if isinstance(out, BenchLayout) else BenchLayout(Path(out))
+    root = layout.root
+    assets = html.Assets(layout.index, INDEX_ASSETS)
+    parts: list[Markup] = [legend()]
+    pages = []
+    for s in sets:
+        parts += set_section(s, assets)
+        pages += [s.bench.run.layout.report_page(m) for m in s.bench.run.matchers]
+        pages += [c.folder.page for c in s.comparisons]
+    links = [html.link(html.relative(p, root), html.relative(p.parent, root)) for p in pages]
     note = f"{len(pages)} pages: a report per matcher and frame-set with its galleries, then the paired comparisons."
-    parts += [html.heading("Reports and comparisons"), html.paragraph(note, "note"), f"<ul>{links}</ul>"]
-    return html.write_page(root / "index.html", f"pin_match results in {root}", parts)
-
-
-def _outer_first(path: Path) -> tuple[int, Path]:
-    """The folder's own pages before those of a set nested in it (the demo's look-alikes), in the tables' order."""
-    return len(path.parts), path
+    parts += [html.heading("Reports and comparisons"), html.paragraph(note, "note"), html.bullets(links)]
+    return html.write_page(layout.index, f"pin_match results in {root}", parts)

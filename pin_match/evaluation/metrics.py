@@ -242,6 +242,18 @@ def localisation_metrics(hits: pd.DataFrame) -> dict[str, float | None]:
                 n_localised_frames=n_frames)
 
 
+@dataclass(frozen=True)
+class Bootstrap:
+    """How an interval is resampled: how many resamples, the generator's seed, the coverage."""
+
+    n_boot: int = 1000
+    seed: int = 0
+    level: float = 0.95
+
+
+DEFAULT_BOOT = Bootstrap()  # the default of every ``boot=`` parameter (frozen, so one shared instance is safe)
+
+
 def bootstrap_ci(scored: Scored, sigma: float, *, n_boot: int = 1000, seed: int = 0,
                  level: float = 0.95) -> dict[str, list[float] | None]:
     """Percentile confidence intervals of ``METRIC_KEYS``, resampling whole episodes with replacement.

@@ -18,7 +18,17 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.metrics import CM, COUNT_KEYS, TM, FrameArrays, episode_counts, frame_arrays, ratios
+from pin_match.evaluation.metrics import (
+    CM,
+    COUNT_KEYS,
+    DEFAULT_BOOT,
+    TM,
+    Bootstrap,
+    FrameArrays,
+    episode_counts,
+    frame_arrays,
+    ratios,
+)
 
 COMPARED = (("auroc_target", "AUROC"), ("auroc_same", "AUROC-same"), ("tm_pct", "TM"), ("cm_pct", "CM"),
             ("match_pct", "%Match"), ("first_match_precision", "FM-prec"))
@@ -80,7 +90,7 @@ class _Side:
 
 def paired_comparison(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: float, sigma_b: float, *,
                       clusters: Mapping[str, str] | None = None, names: tuple[str, str] = ("A", "B"),
-                      n_boot: int = 1000, seed: int = 0, level: float = 0.95) -> pd.DataFrame:
+                      boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
     """Each metric of A and B, B - A, and its paired bootstrap interval; rows = metrics.
 
     ``clusters`` maps episode id to its resampling unit (the target instance); None: each
@@ -93,15 +103,15 @@ def paired_comparison(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: f
     unit_codes, units = pd.factorize(pd.Series(unit_of))
     ones = np.ones(arr.n_episodes)
     point_a, point_b = a.metrics(ones), b.metrics(ones)
-    rng = np.random.default_rng(seed)
-    diffs = {key: np.empty(n_boot) for key, _ in COMPARED}
-    for i in range(n_boot):
+    rng = np.random.default_rng(boot.seed)
+    diffs = {key: np.empty(boot.n_boot) for key, _ in COMPARED}
+    for i in range(boot.n_boot):
         drawn = np.bincount(rng.integers(0, len(units), len(units)), minlength=len(units)).astype(np.float64)
         weights = drawn[unit_codes]
         ma, mb = a.metrics(weights), b.metrics(weights)
         for key, _ in COMPARED:
             diffs[key][i] = mb[key] - ma[key]
-    alpha = (1.0 - level) / 2.0 * 100.0
+    alpha = (1.0 - boot.level) / 2.0 * 100.0
     rows = {}
     for key, header in COMPARED:
         d = diffs[key][~np.isnan(diffs[key])]
@@ -109,7 +119,7 @@ def paired_comparison(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: f
         rows[header] = {names[0]: point_a[key], names[1]: point_b[key],
                         f"{names[1]} - {names[0]}": point_b[key] - point_a[key], "CI low": low, "CI high": high}
     table = pd.DataFrame.from_dict(rows, orient="index").rename_axis("Metric")
-    table.attrs.update(n_episodes=arr.n_episodes, n_units=len(units), n_boot=n_boot, level=level)
+    table.attrs.update(n_episodes=arr.n_episodes, n_units=len(units), n_boot=boot.n_boot, level=boot.level)
     return table
 
 

@@ -11,48 +11,48 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pandas as pd
-
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.evaluator import evaluate
+from pin_match.evaluation.evaluator import EvalContext, evaluate
+from pin_match.evaluation.layout import REPORT_PAGE
 from pin_match.evaluation.plots import plot_per_category, plot_score_distributions, plot_sigma_curves
 from pin_match.evaluation.report_page import write_report_page
 from pin_match.evaluation.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.sweep import sweep
-from pin_match.evaluation.tables import category_table, latex_table, markdown_table, report_row, side_by_side
+from pin_match.evaluation.tables import latex_table, markdown_table, report_tables
 from pin_match.scoring.table import ScoreTable
 
 FILES = ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma_curves.png",
-         "score_distributions.png", "per_category.png", "report.html")
+         "score_distributions.png", "per_category.png", REPORT_PAGE)
 
 
-def report(table: ScoreTable, fs: FrameSet, out_dir: str | Path, *, sigma: float | SigmaChoice | None = None,
-           thresholds: str | Path | None = None, split: str | None = "val", labels: pd.DataFrame | None = None,
-           n_boot: int = 1000, seed: int = 0) -> dict:
+def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path, *,
+           sigma: float | SigmaChoice | None = None, thresholds: str | Path | None = None,
+           split: str | None = "val") -> dict:
     """Evaluate at one sigma and write the report folder; returns metrics.json's content plus ``files``.
 
+    ``data``: the frame-set, or the run's ``EvalContext`` (its labels and bootstrap options).
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
-    or None: then ``thresholds`` (a file, or "paper"), else the matcher's default. ``labels``:
-    ``frame_labels(fs)`` when the caller already has them.
+    or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
     """
+    ctx = EvalContext.of(data)
     choice = sigma if isinstance(sigma, SigmaChoice) else \
         resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
-    result, categories, frames, scored = evaluate(table, fs, choice, split, labels=labels, n_boot=n_boot, seed=seed)
+    evaluation = evaluate(table, ctx, choice, split)
+    result = evaluation.result
     out = Path(out_dir)
     files = [out / name for name in FILES]
-    atomic.write_text(files[1], categories.to_csv(index_label="category"))
-    overall = side_by_side([report_row(result)])
-    per_cat = category_table(categories)
+    atomic.write_text(files[1], evaluation.per_category.to_csv(index_label="category"))
+    overall, per_cat = report_tables(result, evaluation.per_category)
     title = f"{table.matcher_id}, split {result['split']}, sigma = {choice.value:g} ({choice.source})"
     atomic.write_text(files[2], f"# {title}\n\nsigma: {choice.detail}\n\n{markdown_table(overall)}\n\n"
                                 f"## Per target category\n\n{markdown_table(per_cat)}\n")
     atomic.write_text(files[3], latex_table(overall, caption=f"{title}.") + "\n"
                       + latex_table(per_cat, caption=f"{title}, per target category.") + "\n")
-    plot_sigma_curves(sweep(scored), choice.value, files[4], title)
-    plot_score_distributions(scored, choice.value, files[5], title)
-    plot_per_category(categories, files[6], title)
-    write_report_page(files[7], table, fs, frames, result, overall, per_cat)
+    plot_sigma_curves(sweep(evaluation.arrays), choice.value, files[4], title)
+    plot_score_distributions(evaluation.arrays, choice.value, files[5], title)
+    plot_per_category(evaluation.per_category, files[6], title)
+    write_report_page(files[7], table, ctx.fs, evaluation)
     # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)
     atomic.write_json(files[0], result)
     return {**result, "files": [str(f) for f in files]}

@@ -66,6 +66,11 @@ def category_table(categories: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({header: categories[key] for key, header, _ in CATEGORY_COLUMNS}).rename_axis("Category")
 
 
+def report_tables(result: dict, categories: pd.DataFrame) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """A report's two tables: its row of the paper's table and its per-category table."""
+    return side_by_side([report_row(result)]), category_table(categories)
+
+
 def _nan(value: float | None) -> float:
     return math.nan if value is None else float(value)
 
@@ -89,11 +94,16 @@ def text_rows(df: pd.DataFrame) -> list[list[str]]:
     return [[str(index)] + [format_value(v, _decimals(c)) for c, v in row.items()] for index, row in df.iterrows()]
 
 
+def _md(text: object) -> str:
+    """A cell that cannot end its column or row: ``|`` escaped, line breaks as spaces."""
+    return " ".join(str(text).replace("\\", "\\\\").replace("|", "\\|").splitlines())
+
+
 def markdown_table(df: pd.DataFrame) -> str:
     header = [df.index.name or "", *df.columns]
     align = ["---:" if pd.api.types.is_numeric_dtype(df[c]) else "---" for c in df.columns]
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---", *align]) + "|"]
-    lines += ["| " + " | ".join(r) + " |" for r in text_rows(df)]
+    lines = ["| " + " | ".join(_md(h) for h in header) + " |", "|" + "|".join(["---", *align]) + "|"]
+    lines += ["| " + " | ".join(_md(c) for c in r) + " |" for r in text_rows(df)]
     return "\n".join(lines)
 
 

@@ -20,8 +20,8 @@ import pandas as pd
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.evaluator import split_frames
-from pin_match.evaluation.metrics import Scored, detection_metrics, frame_arrays
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.metrics import Scored, detection_metrics
 from pin_match.evaluation.sweep import sweep
 from pin_match.scoring.table import ScoreTable
 
@@ -78,15 +78,14 @@ def sigma_for(scored: Scored, objective: str = DEFAULT_OBJECTIVE, match_floor: f
     return float(curve["sigma"].iloc[choose_sigma(curve, objective, match_floor)[0]])
 
 
-def tune(table: ScoreTable, fs: FrameSet, objective: str = DEFAULT_OBJECTIVE, split: str = "train",
-         match_floor: float = DEFAULT_MATCH_FLOOR, labels: pd.DataFrame | None = None) -> dict:
-    """Pick sigma for ``table``'s matcher on one split of ``fs``; the result is what ``write_thresholds`` stores.
+def tune(table: ScoreTable, data: FrameSet | EvalContext, objective: str = DEFAULT_OBJECTIVE, split: str = "train",
+         match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
+    """Pick sigma for ``table``'s matcher on one split of ``data``; the result is what ``write_thresholds`` stores.
 
-    The table must have been scored on ``fs``; a split it lacks is an error that says how to go on
-    (another split, an explicit sigma or the paper's). ``labels``: ``frame_labels(fs)`` when the
-    caller already has them.
+    The table must have been scored on the frame-set (``data``, or the run's ``EvalContext``); a
+    split it lacks is an error that says how to go on (another split, an explicit sigma or the paper's).
     """
-    scored = frame_arrays(split_frames(table, fs, split, labels))
+    scored = EvalContext.of(data).arrays(table, split)
     curve = sweep(scored)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])

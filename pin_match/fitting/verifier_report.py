@@ -7,15 +7,11 @@ and TM / CM at the sigma tuned (PIN's first-match objective) on the development 
 splits. The default ``effnet`` comes from the same tables: the verifier's first candidate is
 the locate map's best cell, whose cosine is ``effnet``'s frame score.
 
-``python -m pin_match.fitting.verifier_report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT]
-[--figure PNG]``
+``pin-match fit verifier-report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT] [--figure PNG]``
 """
 
 from __future__ import annotations
 
-import argparse
-import json
-import sys
 import tempfile
 from collections.abc import Sequence
 from pathlib import Path
@@ -27,7 +23,7 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import frame_labels
-from pin_match.evaluation.metrics import auroc, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics, frame_arrays, ranking_metrics
 from pin_match.evaluation.paired import paired_comparison
 from pin_match.evaluation.tuning import sigma_for
 from pin_match.fitting.verifier import candidate_table, fit_verifier, frame_scores
@@ -115,7 +111,7 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
         a = scored(labels, effnet_scores(tables[set_name]))
         b = scored(labels, frame_scores(tables[set_name], specs["default"]))
         diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify default"], names=("effnet", "verify"),
-                                 n_boot=n_boot).loc["AUROC-same"]
+                                 boot=Bootstrap(n_boot=n_boot)).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
                                 high=float(diff["CI high"]))
     return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs)
@@ -155,32 +151,3 @@ def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str |
         fig.savefig(tmp, dpi=80, format=Path(path).suffix.lstrip(".") or "png")
     plt.close(fig)
     return Path(path)
-
-
-def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(prog="python -m pin_match.fitting.verifier_report",
-                                description=__doc__.splitlines()[0])
-    p.add_argument("--train", nargs="+", required=True, help="development frame-sets: fitted and tuned on train")
-    p.add_argument("--eval", nargs="+", required=True,
-                   help="frame-sets read, PATH or PATH:SPLIT (a development set: its val split)")
-    p.add_argument("--features", default=str(outputs.FEATURES), help="cache of candidate signals")
-    p.add_argument("--json", help="write the whole report here")
-    p.add_argument("--figure", help="draw the first --eval set's decisions of the default verifier into this PNG")
-    a = p.parse_args(argv)
-    result = report(a.train, a.eval, a.features)
-    table = pd.DataFrame(result["rows"])
-    with pd.option_context("display.width", 200, "display.max_rows", 500):
-        print(table.round(3).to_string(index=False))
-    print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"]), indent=1))
-    if a.json:
-        atomic.write_json(a.json, result)
-    if a.figure:
-        path, _, split = a.eval[0].partition(":")
-        fs = FrameSet.load(path).split(split or None)
-        table = candidate_table(fs, create_matcher("verify"), out=a.features)
-        print(f"wrote {candidates_figure(fs, table, result['specs']['default'], a.figure)}")
-    return 0
-
-
-if __name__ == "__main__":
-    sys.exit(main())

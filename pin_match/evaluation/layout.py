@@ -1,0 +1,83 @@
+"""Where a bench folder (what ``bench`` and ``pin-match demo`` write) keeps each file: one object, asked by all.
+
+``bench`` writes through it, ``analysis.load_bench`` and ``compare_bench`` read through it and
+``index_page`` finds the pages through it, so a file is named in one place. The demo nests a
+second bench folder (the real look-alikes) inside the first: ``BenchLayout.nested``.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+REPORT_PAGE = "report.html"
+COMPARE_PAGE = "compare.html"
+
+
+@dataclass(frozen=True)
+class CompareFolder:
+    """One paired comparison's files: the table as CSV and Markdown, the page and its images."""
+
+    root: Path
+
+    @property
+    def csv(self) -> Path:
+        return self.root / "compare.csv"
+
+    @property
+    def markdown(self) -> Path:
+        return self.root / "compare.md"
+
+    @property
+    def page(self) -> Path:
+        return self.root / COMPARE_PAGE
+
+
+@dataclass(frozen=True)
+class BenchLayout:
+    """The files of one bench folder, by matcher name."""
+
+    root: Path
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "root", Path(self.root))
+
+    @property
+    def frameset(self) -> Path:
+        """Where the demo keeps the frame-set it built (``load_bench``'s default frame-set)."""
+        return self.root / "frameset"
+
+    @property
+    def scores(self) -> Path:
+        """The score cache (``scoring.cache.cache_dir`` under it)."""
+        return self.root / "scores"
+
+    def thresholds(self, matcher: str) -> Path:
+        """The tuned sigma (absent when sigma was not tuned)."""
+        return self.root / "thresholds" / f"{matcher}.json"
+
+    def report(self, matcher: str) -> Path:
+        return self.root / "reports" / matcher
+
+    def report_metrics(self) -> list[Path]:
+        """Every report's ``metrics.json`` (written last, so a report that stopped has none), sorted by matcher."""
+        return sorted((self.root / "reports").glob("*/metrics.json"))
+
+    def report_page(self, matcher: str) -> Path:
+        return self.report(matcher) / REPORT_PAGE
+
+    def compare(self, first: str, other: str) -> CompareFolder:
+        """``other`` against ``first`` (the differences are other minus first)."""
+        return CompareFolder(self.root / "compare" / f"{other}_vs_{first}")
+
+    def table(self, suffix: str) -> Path:
+        """The side-by-side table as ``md``, ``tex`` or ``csv``."""
+        return self.root / f"table.{suffix}"
+
+    @property
+    def index(self) -> Path:
+        return self.root / "index.html"
+
+    def nested(self, name: str) -> BenchLayout:
+        """A second bench folder inside this one (the demo's real look-alikes)."""
+        return BenchLayout(self.root / name)
