@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli import catalog, data, evaluation, pages, training
+from pin_match.cli import catalog, data, evaluation, fitting, pages, training
 from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
 from pin_match.errors import PinMatchError
 
@@ -135,6 +135,7 @@ def build_parser() -> argparse.ArgumentParser:
     evaluation.add_commands(sub)
     pages.add_commands(sub)
     training.add_commands(sub)
+    fitting.add_commands(sub)
     return p
 
 

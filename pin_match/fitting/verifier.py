@@ -6,9 +6,10 @@ or the target fills a quarter of it) is a positive; every candidate of a frame w
 target is a negative, of the same-category class when a look-alike is in view and of the
 other class otherwise; a candidate beside the target in a target frame says nothing about
 the target's signals and is left out. The three classes weigh the same, as in the score
-fusion (``labels.class_weights``). The signals of every candidate of a frame-set are computed once and cached by the
-matcher's ``signals_id`` and the frame-set's fingerprint, so fits, ablations (signals left
-out) and evaluations reuse them; the frame score from cached signals is the matcher's own.
+fusion (``labels.class_weights``). The signals of every candidate of a frame-set are computed
+once and cached by the score cache's folder rule (the matcher's ``signals_id``, the frame-set's
+fingerprint; metadata checked), so fits, ablations (signals left out) and evaluations reuse
+them; the frame score from cached signals is the matcher's own.
 """
 
 from __future__ import annotations
@@ -20,13 +21,17 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import pyarrow as pa
 
+import pin_match
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import SIGNALS, VERIFIER_FORMAT, VERIFIER_VERSION, VerifyMatcher, read_verifier, verdict
+from pin_match.scoring.cache import cache_dir, read_meta
+from pin_match.scoring.schema import encode_meta
 
 ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
 TARGET_FILL = 0.25     # ... or of the box covered by the target
@@ -46,16 +51,33 @@ def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = o
                     progress: bool = False) -> pd.DataFrame:
     """One row per candidate of every frame of ``fs``: its box, whether it is on the target, its signals.
 
-    Cached by the matcher's ``signals_id``: a table holding the signals asked for is read, whatever else it holds.
+    Cached by the score cache's folder rule, ``cache_dir(out, "verify-signals@<signals_id>",
+    fingerprint)``, one file per set of splits (a split of a frame-set keeps the whole set's
+    fingerprint, so it reads the whole set's file). A file counts when its metadata names this
+    signals id and frame-set and it holds the signals asked for and every episode; a damaged
+    file or another's is not a hit, and is computed again.
     """
-    folder = Path(out) / "verify-signals" / matcher.signals_id
-    splits = "+".join(sorted(set(fs.episodes.split)))  # a split of a frame-set keeps the whole set's fingerprint
-    cache = folder / f"{fs.fingerprint[:16]}_{splits}.parquet"
+    folder = cache_dir(out, f"verify-signals@{matcher.signals_id}", fs.fingerprint)
     episodes = set(fs.episodes.episode_id)
-    for found in sorted(folder.glob(f"{fs.fingerprint[:16]}_*.parquet")):  # this set, or the whole set it is a split of
-        table = pd.read_parquet(found)
-        if set(matcher.cfg.signals) <= set(table.columns) and episodes <= set(table.episode_id):
+    for found in sorted(folder.glob("candidates_*.parquet")):  # this set, or the whole set it is a split of
+        meta = read_meta(found) or {}
+        if (meta.get("signals_id"), meta.get("frameset_fingerprint")) == (matcher.signals_id, fs.fingerprint) \
+                and set(matcher.cfg.signals) <= set(meta["signals"]) and episodes <= set(meta["episodes"]):
+            table = pd.read_parquet(found)
             return table[table.episode_id.isin(episodes)].reset_index(drop=True)
+    table = compute_candidates(fs, matcher, batch_size, progress)
+    signals = [s for s in SIGNALS if s in table.columns]
+    meta = dict(kind="verify candidate signals", signals_id=matcher.signals_id, signals=signals,
+                frameset_fingerprint=fs.fingerprint, frameset_name=fs.manifest.get("name", ""),
+                episodes=sorted(episodes), pin_match_version=pin_match.__version__)
+    stored = pa.Table.from_pandas(table, preserve_index=False)
+    stored = stored.replace_schema_metadata({**(stored.schema.metadata or {}), **encode_meta(meta)})
+    atomic.write_parquet(folder / f"candidates_{'+'.join(sorted(set(fs.episodes.split)))}.parquet", stored)
+    return table
+
+
+def compute_candidates(fs: FrameSet, matcher: VerifyMatcher, batch_size: int, progress: bool) -> pd.DataFrame:
+    """``candidate_table``'s rows, computed: every episode's frames through ``candidate_signals``."""
     rows = []
     for n, episode in enumerate(fs.episodes.itertuples(), 1):
         matcher.prepare(fs.target(episode.target_object_id))
@@ -70,9 +92,7 @@ def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = o
                                      on_target=on_target(cand.box, target), **signals))
         if progress:
             print(f"verify signals: {fs.root.name} episode {n}/{len(fs.episodes)}", file=sys.stderr)
-    table = pd.DataFrame(rows)
-    atomic.write_parquet(cache, table)
-    return table
+    return pd.DataFrame(rows)
 
 
 def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, dict[str, int]]:
