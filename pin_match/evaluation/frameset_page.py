@@ -3,7 +3,7 @@
 A matcher can only be as good as its references and ground truth, so the page shows every
 object's reference views on a checkerboard (a cut-out that kept its background, or lost
 its object, is flagged and framed in red), a seeded sample of frames per role with the mask
-outlines, and the counts per split and category.
+outlines, the counts per split and category, and the target's size per split.
 """
 
 from __future__ import annotations
@@ -55,6 +55,29 @@ def counts(fs: FrameSet) -> pd.DataFrame:
     return table.rename_axis("split / category")
 
 
+LARGE_PX = 2000  # a target this large is one an instance matcher can be asked to recognise
+
+
+def target_sizes(labels: pd.DataFrame) -> pd.DataFrame:
+    """Per split: how large the target is where it shows (pixels: quantiles), and how many episodes show it large.
+
+    Two splits whose targets differ in size cannot share a sigma: one tuned where targets are
+    large meets specks on the other. ``labels``: ``frame_labels`` of the frame-set.
+    """
+    shown = labels[labels.target_pixels > 0]
+    large = shown[shown.target_pixels >= LARGE_PX].groupby(["split", "episode_id"]).size()
+    rows = {}
+    for split, group in labels.groupby("split"):
+        pixels = shown.target_pixels[shown.split == split]
+        episodes = group.episode_id.nunique()
+        per_episode = large.get(split, pd.Series(dtype=int))
+        quantiles = {f"p{q}": float(np.percentile(pixels, q)) if len(pixels) else np.nan for q in (10, 25, 50, 75, 90)}
+        rows[split] = {"episodes": episodes, "target frames": len(pixels), **quantiles,
+                       f"frames >= {LARGE_PX} px": int((pixels >= LARGE_PX).sum()),
+                       "episodes with 3 such frames": int((per_episode >= 3).sum())}
+    return pd.DataFrame.from_dict(rows, orient="index").rename_axis("split")
+
+
 def object_figures(fs: FrameSet, assets: html.Assets) -> tuple[list[Markup], int]:
     """One figure per object (capped at ``MAX_OBJECTS``) and how many objects have a visible problem."""
     uses = fs.episodes.target_object_id.value_counts()
@@ -98,6 +121,10 @@ def write_frameset_page(fs: FrameSet, out_dir: str | Path, *, per_role: int = FR
                                ("fingerprint", fs.fingerprint), ("objects", len(fs.objects)),
                                ("episodes", len(fs.episodes)), ("frames", len(fs.frames))]),
              html.heading("Counts per split and target category"), html.table(counts(fs)),
+             html.heading("Target size per split"),
+             html.paragraph("Visible pixels of the target in the frames that show it (percentiles), and the "
+                            f"episodes that show it at {LARGE_PX} pixels or more in at least three frames.", "note"),
+             html.table(target_sizes(labels)),
              html.heading("Every object's reference views"),
              html.paragraph(f"{shown}, on a checkerboard so the cut-out shows. {n_bad} objects have a visible "
                             "problem (red frame: not cut out, empty, or one image repeated).", "note"),
