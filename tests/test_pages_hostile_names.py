@@ -36,34 +36,38 @@ PAGE_TAGS = {"html", "head", "meta", "title", "style", "body", "h1", "h2", "h3",
              "span"}
 
 
-@register_matcher(MATCHER_A)
-class RedMatcher(CropMatcher):
-    """Score: the share of the crop's pixels that are red (the colour of no val target)."""
+class ToyMatcher(CropMatcher):
+    """A score from the crop's pixels alone (``crop_score``), the crop's centre as its point."""
 
     modality = Modality.VISUAL
-    default_sigma = 0.01
 
     def _prepare(self, target):
         pass
 
     def _match_crops(self, crops):
-        return [MatchResult(score=float(((c[..., 0] > 150) & (c[..., 2] < 100)).mean()),
-                            points=[[c.shape[1] / 2, c.shape[0] / 2]]) for c in crops]
+        return [MatchResult(score=self.crop_score(c), points=[[c.shape[1] / 2, c.shape[0] / 2]]) for c in crops]
+
+
+@register_matcher(MATCHER_A)
+class RedMatcher(ToyMatcher):
+    """The share of the crop's pixels that are red (the colour of no val target)."""
+
+    default_sigma = 0.01
+
+    @staticmethod
+    def crop_score(crop: np.ndarray) -> float:
+        return float(((crop[..., 0] > 150) & (crop[..., 2] < 100)).mean())
 
 
 @register_matcher(MATCHER_B)
-class BrightMatcher(CropMatcher):
-    """Score: the crop's mean brightness in [0, 1]."""
+class BrightMatcher(ToyMatcher):
+    """The crop's mean brightness in [0, 1]."""
 
-    modality = Modality.VISUAL
     default_sigma = 0.4
 
-    def _prepare(self, target):
-        pass
-
-    def _match_crops(self, crops):
-        return [MatchResult(score=float(c.mean() / 255.0), points=[[c.shape[1] / 3, c.shape[0] / 3]])
-                for c in crops]
+    @staticmethod
+    def crop_score(crop: np.ndarray) -> float:
+        return float(crop.mean() / 255.0)
 
 
 @pytest.fixture(scope="module")
