@@ -12,7 +12,6 @@ from pin_match.evaluation.metrics import (
     MetricsError,
     auroc,
     average_precision,
-    bootstrap_ci,
     detection_metrics,
     localisation_metrics,
     per_category,
@@ -132,18 +131,6 @@ def test_auroc_and_ap_edge_cases():
     assert math.isnan(average_precision(np.array([0.1, 0.2]), np.array([False, False])))
     # all tied: one step at recall 1 with precision 1/2
     assert average_precision(np.array([0.3, 0.3]), np.array([True, False])) == 0.5
-
-
-def test_bootstrap_is_seeded_and_honours_undefined():
-    df = hand_scored()
-    a = bootstrap_ci(df, 0.6, n_boot=200, seed=1)
-    assert a == bootstrap_ci(df, 0.6, n_boot=200, seed=1)
-    lo, hi = a["tm_pct"]
-    assert 0.0 <= lo <= hi <= 100.0
-    assert bootstrap_ci(df, 1.0, n_boot=50)["tm_pct"] is None  # undefined in every resample
-    one = df[df.episode_id == "A"]  # a single episode: every resample is the same -> a point interval
-    # A at 0.6: a0 TM, a1 CM -> 50 %
-    assert bootstrap_ci(one, 0.6, n_boot=20)["tm_pct"] == [50.0, 50.0]
 
 
 def test_localisation_metrics():

@@ -7,6 +7,7 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import EvalContext
+from pin_match.evaluation.intervals import weighted_auroc
 from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics
 from pin_match.evaluation.paired import (
     PairedError,
@@ -14,7 +15,6 @@ from pin_match.evaluation.paired import (
     first_match_outcomes,
     mcnemar,
     paired_comparison,
-    weighted_auroc,
 )
 
 

@@ -57,8 +57,7 @@ def compare(a: AtSigma, b: AtSigma, data: FrameSet | EvalContext, out: str | Pat
     folder = out if isinstance(out, CompareFolder) else CompareFolder(Path(out))
     names = (a.table.matcher_id, b.table.matcher_id)
     scored_a, scored_b = (ctx.scored(side.table, split) for side in (a, b))
-    clusters = dict(zip(ctx.fs.episodes.episode_id, ctx.fs.episodes.target_object_id))
-    paired = paired_comparison(scored_a, scored_b, a.sigma.value, b.sigma.value, clusters=clusters, names=names,
+    paired = paired_comparison(scored_a, scored_b, a.sigma.value, b.sigma.value, clusters=ctx.clusters, names=names,
                                boot=ctx.boot)
     test = mcnemar(*first_match_outcomes(scored_a, scored_b, a.sigma.value, b.sigma.value))
     atomic.write_text(folder.csv, paired.to_csv())

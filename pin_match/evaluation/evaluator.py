@@ -19,12 +19,12 @@ import pandas as pd
 
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.intervals import bootstrap_ci, instance_clusters
 from pin_match.evaluation.labels import frame_labels, localisation_hits, scored_frames
 from pin_match.evaluation.metrics import (
     DEFAULT_BOOT,
     Bootstrap,
     FrameArrays,
-    bootstrap_ci,
     detection_metrics,
     frame_arrays,
     localisation_metrics,
@@ -68,6 +68,11 @@ class EvalContext:
     def labels(self) -> pd.DataFrame:
         """``frame_labels`` of the frame-set."""
         return frame_labels(self.fs)
+
+    @cached_property
+    def clusters(self) -> dict[str, str]:
+        """Each episode's resampling unit for every interval of the run: its target instance."""
+        return instance_clusters(self.fs.episodes)
 
     def scored(self, table: ScoreTable, split: str | None) -> pd.DataFrame:
         """The frame labels of one split's scored frames with their score; a missing split says how to go on."""
@@ -117,7 +122,7 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   modality=table.meta.get("modality"), frameset_fingerprint=ctx.fs.fingerprint, split=split or "all",
                   **sigma.as_dict(), metrics=metrics,
-                  ci95=bootstrap_ci(arr, sigma.value, n_boot=ctx.boot.n_boot, seed=ctx.boot.seed, level=ctx.boot.level),
+                  ci95=bootstrap_ci(arr, sigma.value, clusters=ctx.clusters, boot=ctx.boot),
                   n_bootstrap=ctx.boot.n_boot,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
     return Evaluation(result, per_category(arr, sigma.value), scored, arr)

@@ -252,29 +252,3 @@ class Bootstrap:
 
 
 DEFAULT_BOOT = Bootstrap()  # the default of every ``boot=`` parameter (frozen, so one shared instance is safe)
-
-
-def bootstrap_ci(scored: Scored, sigma: float, *, n_boot: int = 1000, seed: int = 0,
-                 level: float = 0.95) -> dict[str, list[float] | None]:
-    """Percentile confidence intervals of ``METRIC_KEYS``, resampling whole episodes with replacement.
-
-    Episodes, not frames, are the independent units (frames of one episode are strongly
-    correlated). Resamples where a metric is undefined are left out of its interval; a
-    metric undefined in every resample has no interval (None).
-    """
-    arr = as_arrays(scored)
-    per_episode = episode_counts(arr, sigma)
-    matrix = np.stack([per_episode[k] for k in COUNT_KEYS], axis=1)  # episodes x counts
-    rng = np.random.default_rng(seed)
-    sums = np.empty((n_boot, len(COUNT_KEYS)))
-    chunk = max(1, 4_000_000 // max(1, matrix.size))  # bounds the resample buffer to ~32 MB
-    for start in range(0, n_boot, chunk):
-        idx = rng.integers(0, arr.n_episodes, size=(min(chunk, n_boot - start), arr.n_episodes))
-        sums[start:start + len(idx)] = matrix[idx].sum(axis=1)
-    values = ratios({k: sums[:, i] for i, k in enumerate(COUNT_KEYS)})
-    alpha = (1.0 - level) / 2.0 * 100.0
-    out: dict[str, list[float] | None] = {}
-    for k, v in values.items():
-        v = v[~np.isnan(v)]
-        out[k] = [float(np.percentile(v, alpha)), float(np.percentile(v, 100.0 - alpha))] if v.size else None
-    return out

@@ -5,8 +5,8 @@ saw the same episodes. Here every bootstrap resample draws one set of *target in
 (all episodes of a drawn instance enter together, as often as it is drawn) and computes
 both matchers' metrics on it, so the interval is that of the difference. Episodes of one
 instance are correlated (same object, often the same look-alikes), hence the clusters; a
-frame-set with one episode per target reduces to resampling episodes. Definitions:
-docs/metrics.md, "Paired comparison".
+frame-set with one episode per target reduces to resampling episodes: the resampling of
+``intervals``, which every interval shares. Definitions: docs/metrics.md, "Paired comparison".
 """
 
 from __future__ import annotations
@@ -18,17 +18,8 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.metrics import (
-    CM,
-    COUNT_KEYS,
-    DEFAULT_BOOT,
-    TM,
-    Bootstrap,
-    FrameArrays,
-    episode_counts,
-    frame_arrays,
-    ratios,
-)
+from pin_match.evaluation.intervals import Resampled, episode_weights, percentile_interval, unit_codes
+from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, frame_arrays
 
 COMPARED = (("auroc_target", "AUROC"), ("auroc_same", "AUROC-same"), ("tm_pct", "TM"), ("cm_pct", "CM"),
             ("match_pct", "%Match"), ("first_match_precision", "FM-prec"))
@@ -54,40 +45,6 @@ def _arrays(both: pd.DataFrame, side: str) -> FrameArrays:
     return frame_arrays(both.assign(score=both[f"score_{side}"]))
 
 
-def weighted_auroc(inverse: np.ndarray, n_values: int, positive: np.ndarray, negative: np.ndarray,
-                   weights: np.ndarray) -> float:
-    """Mann-Whitney AUROC where each frame counts ``weights`` times (ties one half); ``inverse`` ranks the scores."""
-    wp = np.bincount(inverse, weights * positive, minlength=n_values)
-    wn = np.bincount(inverse, weights * negative, minlength=n_values)
-    total_p, total_n = wp.sum(), wn.sum()
-    if total_p == 0 or total_n == 0:
-        return math.nan
-    below = np.cumsum(wn) - wn
-    return float(np.sum(wp * (below + 0.5 * wn)) / (total_p * total_n))
-
-
-class _Side:
-    """One matcher's per-episode counts and score ranks: what every resample reweights."""
-
-    def __init__(self, arr: FrameArrays, sigma: float) -> None:
-        counts = episode_counts(arr, sigma)
-        self.matrix = np.stack([counts[k] for k in COUNT_KEYS], axis=1)
-        self.first_tm = counts["n_first_tm"].astype(bool)
-        values, self.inverse = np.unique(arr.score, return_inverse=True)
-        self.n_values = len(values)
-        self.episode = arr.episode
-        self.target = (arr.cls == TM).astype(np.float64)
-        self.same = (arr.cls == CM).astype(np.float64)
-
-    def metrics(self, episode_weights: np.ndarray) -> dict[str, float]:
-        sums = episode_weights @ self.matrix
-        out = {k: float(v) for k, v in ratios(dict(zip(COUNT_KEYS, sums))).items()}
-        w = episode_weights[self.episode]
-        out["auroc_target"] = weighted_auroc(self.inverse, self.n_values, self.target, 1.0 - self.target, w)
-        out["auroc_same"] = weighted_auroc(self.inverse, self.n_values, self.target, self.same, w)
-        return out
-
-
 def paired_comparison(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: float, sigma_b: float, *,
                       clusters: Mapping[str, str] | None = None, names: tuple[str, str] = ("A", "B"),
                       boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
@@ -98,28 +55,23 @@ def paired_comparison(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: f
     """
     both = align(scored_a, scored_b, names)
     arr = _arrays(both, "a")
-    a, b = _Side(arr, sigma_a), _Side(_arrays(both, "b"), sigma_b)
-    unit_of = [clusters[e] if clusters is not None else e for e in arr.episode_ids]
-    unit_codes, units = pd.factorize(pd.Series(unit_of))
+    a, b = Resampled(arr, sigma_a), Resampled(_arrays(both, "b"), sigma_b)
+    codes = unit_codes(arr.episode_ids, clusters)
     ones = np.ones(arr.n_episodes)
     point_a, point_b = a.metrics(ones), b.metrics(ones)
-    rng = np.random.default_rng(boot.seed)
     diffs = {key: np.empty(boot.n_boot) for key, _ in COMPARED}
-    for i in range(boot.n_boot):
-        drawn = np.bincount(rng.integers(0, len(units), len(units)), minlength=len(units)).astype(np.float64)
-        weights = drawn[unit_codes]
+    for i, weights in enumerate(episode_weights(codes, boot)):
         ma, mb = a.metrics(weights), b.metrics(weights)
         for key, _ in COMPARED:
             diffs[key][i] = mb[key] - ma[key]
-    alpha = (1.0 - boot.level) / 2.0 * 100.0
     rows = {}
     for key, header in COMPARED:
-        d = diffs[key][~np.isnan(diffs[key])]
-        low, high = (np.percentile(d, alpha), np.percentile(d, 100.0 - alpha)) if d.size else (math.nan, math.nan)
+        low, high = percentile_interval(diffs[key], boot.level)
         rows[header] = {names[0]: point_a[key], names[1]: point_b[key],
                         f"{names[1]} - {names[0]}": point_b[key] - point_a[key], "CI low": low, "CI high": high}
     table = pd.DataFrame.from_dict(rows, orient="index").rename_axis("Metric")
-    table.attrs.update(n_episodes=arr.n_episodes, n_units=len(units), n_boot=boot.n_boot, level=boot.level)
+    n_units = int(codes.max()) + 1 if len(codes) else 0
+    table.attrs.update(n_episodes=arr.n_episodes, n_units=n_units, n_boot=boot.n_boot, level=boot.level)
     return table
 
 
@@ -137,7 +89,7 @@ def first_match_outcomes(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a
                          sigma_b: float) -> tuple[np.ndarray, np.ndarray]:
     """Per episode (same order for both): is each matcher's first frame at or above its sigma the target?"""
     both = align(scored_a, scored_b)
-    return (_Side(_arrays(both, "a"), sigma_a).first_tm, _Side(_arrays(both, "b"), sigma_b).first_tm)
+    return (Resampled(_arrays(both, "a"), sigma_a).first_tm, Resampled(_arrays(both, "b"), sigma_b).first_tm)
 
 
 def disagreements(scored_a: pd.DataFrame, scored_b: pd.DataFrame, sigma_a: float, sigma_b: float,

@@ -2,10 +2,11 @@
 
 Every signal set (each signal alone, each left out, all) is fitted on the train splits of the
 development frame-sets and read, with the same cached signals, on every evaluation set: AUROC
-of target frames against same-category look-alike frames with an episode-bootstrap interval,
-and TM / CM at the sigma tuned (PIN's first-match objective) on the development train
-splits. The default ``effnet`` comes from the same tables: the verifier's first candidate is
-the locate map's best cell, whose cosine is ``effnet``'s frame score.
+of target frames against same-category look-alike frames with its interval (target instances
+resampled, ``intervals.bootstrap_ci``, as in every table), and TM / CM at the sigma tuned
+(PIN's first-match objective) on the development train splits. The default ``effnet`` comes
+from the same tables: the verifier's first candidate is the locate map's best cell, whose
+cosine is ``effnet``'s frame score.
 
 ``pin-match fit verifier-report --train FS ... --eval FS[:SPLIT] ... [--features DIR] [--json OUT] [--figure PNG]``
 """
@@ -22,8 +23,9 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.intervals import bootstrap_ci, instance_clusters
 from pin_match.evaluation.labels import frame_labels
-from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, detection_metrics, frame_arrays, ranking_metrics
 from pin_match.evaluation.paired import paired_comparison
 from pin_match.evaluation.tuning import sigma_for
 from pin_match.fitting.verifier import candidate_table, fit_verifier, frame_scores
@@ -55,26 +57,8 @@ def effnet_scores(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"frame_id": first.frame_id.to_numpy(), "score": first.proto.to_numpy()})
 
 
-def auroc_same_interval(frames: pd.DataFrame, n_boot: int = 1000, seed: int = 0) -> tuple[float, float, float]:
-    """AUROC target vs same-category look-alike frames and its 95 % interval, resampling episodes."""
-    target = frames.target_visible.to_numpy(bool)
-    same = frames.same_visible.to_numpy(bool) & ~target
-    score = frames.score.to_numpy(float)
-    codes, episodes = pd.factorize(frames.episode_id)
-    rng = np.random.default_rng(seed)
-    values = []
-    for _ in range(n_boot):
-        drawn = np.bincount(rng.integers(0, len(episodes), len(episodes)), minlength=len(episodes))
-        take = np.repeat(np.arange(len(frames)), drawn[codes])
-        value = auroc(score[take][target[take]], score[take][same[take]])
-        if not np.isnan(value):
-            values.append(value)
-    low, high = np.percentile(values, [2.5, 97.5]) if values else (np.nan, np.nan)
-    return auroc(score[target], score[same]), float(low), float(high)
-
-
 def report(train: Sequence[str], evals: Sequence[str], features: str | Path = outputs.FEATURES,
-           n_boot: int = 1000) -> dict:
+           boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """Every signal set and ``effnet`` on every evaluation set (val split where it has one, else all frames)."""
     train_sets = [FrameSet.load(p).split("train") for p in train]
     eval_sets = {}
@@ -93,6 +77,7 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
     dev_names = [Path(p).name for p in train]
     dev_labels = [split_labels(fs, "train") for fs in train_sets]
     eval_labels = {name: split_labels(fs, "val" if name in dev_names else None) for name, fs in eval_sets.items()}
+    clusters = {name: instance_clusters(fs.episodes) for name, fs in eval_sets.items()}
     for name, score_of in scorers.items():
         dev = pd.concat([scored(labels, score_of(tables[set_name])).assign(  # variants share ids
             frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
@@ -101,17 +86,19 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
         for set_name, labels in eval_labels.items():
             frames = scored(labels, score_of(tables[set_name]))
             arrays = frame_arrays(frames)
-            value, low, high = auroc_same_interval(frames, n_boot)
+            low, high = bootstrap_ci(arrays, sigmas[name], clusters=clusters[set_name], boot=boot)["auroc_same"] \
+                or (np.nan, np.nan)
             at = detection_metrics(arrays, sigmas[name])
-            rows.append(dict(matcher=name, set=set_name, auroc_same=value, low=low, high=high,
-                             auroc=ranking_metrics(arrays)["auroc_target"], sigma=sigmas[name],
+            ranking = ranking_metrics(arrays)
+            rows.append(dict(matcher=name, set=set_name, auroc_same=ranking["auroc_same"], low=low, high=high,
+                             auroc=ranking["auroc_target"], sigma=sigmas[name],
                              tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"]))
     paired = {}
     for set_name, labels in eval_labels.items():
         a = scored(labels, effnet_scores(tables[set_name]))
         b = scored(labels, frame_scores(tables[set_name], specs["default"]))
         diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify default"], names=("effnet", "verify"),
-                                 boot=Bootstrap(n_boot=n_boot)).loc["AUROC-same"]
+                                 clusters=clusters[set_name], boot=boot).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
                                 high=float(diff["CI high"]))
     return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs)

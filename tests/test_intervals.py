@@ -1,0 +1,63 @@
+"""One interval definition: target instances resampled, shared by a report's intervals and the paired ones."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from test_metrics import hand_scored
+
+from pin_match.evaluation.intervals import (
+    bootstrap_ci,
+    episode_weights,
+    instance_clusters,
+    percentile_interval,
+    unit_codes,
+)
+from pin_match.evaluation.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+
+
+def test_bootstrap_is_seeded_and_honours_undefined():
+    df = hand_scored()
+    a = bootstrap_ci(df, 0.6, boot=Bootstrap(n_boot=200, seed=1))
+    assert a == bootstrap_ci(df, 0.6, boot=Bootstrap(n_boot=200, seed=1))
+    lo, hi = a["tm_pct"]
+    assert 0.0 <= lo <= hi <= 100.0
+    assert bootstrap_ci(df, 1.0, boot=Bootstrap(n_boot=50))["tm_pct"] is None  # undefined in every resample
+    one = df[df.episode_id == "A"]  # a single episode: every resample is the same -> a point interval
+    # A at 0.6: a0 TM, a1 CM -> 50 %
+    assert bootstrap_ci(one, 0.6, boot=Bootstrap(n_boot=20))["tm_pct"] == [50.0, 50.0]
+
+
+def test_episodes_of_one_instance_are_drawn_together():
+    df = hand_scored()
+    point = {**detection_metrics(df, 0.6), **ranking_metrics(frame_arrays(df))}
+    # one instance behind all three episodes: every resample holds each episode once -> point intervals
+    together = bootstrap_ci(df, 0.6, clusters=dict(A="x", B="x", C="x"), boot=Bootstrap(n_boot=50))
+    for key in ("tm_pct", "cm_pct", "match_pct", "first_match_success", "auroc_target", "auroc_same"):
+        assert together[key] == pytest.approx([point[key], point[key]]), key
+    # each episode its own unit: %Match at 0.6 is 2/4, 3/4 and 0/2 in A, B and C, so the draws spread it
+    apart = bootstrap_ci(df, 0.6, boot=Bootstrap(n_boot=200))
+    assert apart["match_pct"][0] < point["match_pct"] < apart["match_pct"][1]
+
+
+def test_units_and_weights_by_hand():
+    assert unit_codes(["e1", "e2", "e3"], {"e1": "mug", "e2": "cup", "e3": "mug"}).tolist() == [0, 1, 0]
+    assert unit_codes(["e1", "e2"], None).tolist() == [0, 1]
+    codes = np.array([0, 1, 0])
+    for weights in episode_weights(codes, Bootstrap(n_boot=30, seed=4)):
+        assert weights[0] == weights[2] and weights[0] + weights[1] == 2.0  # 2 units drawn, mugs together
+    rng = np.random.default_rng(4)  # the draw is numpy's generator on the unit count, as documented
+    first = next(episode_weights(codes, Bootstrap(n_boot=1, seed=4)))
+    assert first.tolist() == np.bincount(rng.integers(0, 2, 2), minlength=2)[codes].astype(float).tolist()
+
+
+def test_percentile_interval_leaves_undefined_resamples_out():
+    assert percentile_interval(np.array([1.0, np.nan, 3.0]), 1.0) == (1.0, 3.0)
+    assert all(math.isnan(v) for v in percentile_interval(np.array([np.nan]), 0.95))
+
+
+def test_instance_clusters_read_the_episodes_table(tiny_frameset):
+    clusters = instance_clusters(tiny_frameset.episodes)
+    assert clusters == dict(zip(tiny_frameset.episodes.episode_id, tiny_frameset.episodes.target_object_id))
