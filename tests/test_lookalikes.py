@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
-from pin_match.data.sources.lookalike_set import build, plan_episodes
+from pin_match.data.sources.lookalike_set import APPROACH_DISTANCES_M, build, plan_episodes
 from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
     PACKAGED_SRC,
@@ -17,6 +17,7 @@ from pin_match.data.sources.photo_folder import (
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
+    balanced_splits,
     instance_splits,
     load_photos,
     write_csv,
@@ -168,6 +169,45 @@ def test_build_writes_roles_from_masks_and_is_deterministic(tmp_path, variant):
     views = fs.target(fs.episodes.target_object_id.iloc[0]).views
     assert len(views) == 3 and all(v.shape[2] == 4 for v in views)
     assert np.array_equal(views[1][..., 3], views[0][..., 3][:, ::-1])  # one reference photo: view 1 is its mirror
+
+
+def test_balanced_splits_share_the_instances_that_can_be_targets():
+    counts = {"a1": 3, "a2": 2, "a3": 1, "a4": 1, "b1": 2, "b2": 1}
+    photos = [Photo(f"{i}_{k}", i, i[0], "", "") for i, n in counts.items() for k in range(n)]
+    split = balanced_splits(photos)
+    # category a (4 instances) first: dealt out most-photographed first, starting with train (both splits empty);
+    # category b (2) goes whole to the split with fewer instances of two photos or more: a tie, so train again
+    assert (split["a1"], split["a2"]) == ("train", "val")
+    assert {split["a3"], split["a4"]} == {"train", "val"}
+    assert split["b1"] == split["b2"] == "train"
+    fixed = [Photo(p.photo_id, p.instance_id, p.category, p.file, p.mask, split="val") for p in photos]
+    assert set(balanced_splits(fixed).values()) == {"val"}  # a source that fixes splits keeps them
+
+
+def test_approach_ends_each_episode_walking_up_to_its_target(tmp_path):
+    _source(tmp_path / "src", COLOURS)
+    fs = build(tmp_path / "a", tmp_path / "src", variant="approach")
+    vis = fs.visibility.merge(fs.frames[["frame_id", "episode_id", "step"]], on="frame_id")
+    for ep in fs.episodes.itertuples():
+        rows = vis[vis.episode_id == ep.episode_id].sort_values("step")
+        steps = fs.frames[fs.frames.episode_id == ep.episode_id].step
+        target = rows[rows.role == "target"]
+        # one frame photo, shown at every approach distance, last in the episode and growing as the walk nears it
+        assert len(target) == len(APPROACH_DISTANCES_M)
+        assert list(target.step) == list(range(steps.max() - len(target) + 1, steps.max() + 1))
+        assert target.pixels.is_monotonic_increasing and target.pixels.iloc[-1] > 5 * target.pixels.iloc[0]
+
+
+def test_the_demo_approach_set_has_forty_val_target_frames_without_the_wrong_cutouts(tmp_path):
+    from pin_match.data.sources import get
+    from pin_match.data.sources.core50 import CORE50_BAD_MASKS
+
+    fs = get("core50").build(tmp_path / "approach", "approach")
+    val = fs.visibility[fs.visibility.frame_id.isin(fs.frames[fs.frames.split == "val"].frame_id)]
+    assert (val.role == "target").sum() >= 40
+    assert (val.role == "same_category").sum() > 0 and set(fs.episodes.split) == {"train", "val"}
+    shipped = {p.photo_id for p in load_photos(PACKAGED_SRC)}
+    assert fs.manifest["provenance"]["left_out"] == sorted(shipped & set(CORE50_BAD_MASKS))
 
 
 def test_build_errors_name_the_problem(tmp_path):

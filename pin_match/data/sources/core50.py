@@ -13,6 +13,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from pin_match import atomic
+from pin_match.data.frameset import FrameSet
 from pin_match.data.images import read_image
 from pin_match.data.mask_check import checked_mask
 from pin_match.data.sources import lookalike_set
@@ -50,6 +51,13 @@ CORE50_BAD_MASKS = {
     "core50_s04_o28_006": "the skin repair eats the pink frame: the object's colour is in the skin box",
     "core50_s06_o45_010": "the skin repair eats the mauve mug: the object's colour is in the skin box",
     "core50_s09_o41_011": "the skin repair eats the red print of the mug",
+    # found on the approach variant's contact sheet (references beside the target cut-out); still shipped, and used
+    # by shot and pasted, whose published numbers were measured with them; the approach variant leaves them out
+    "core50_s07_o11_004": "the mask takes the handles with the wall inside them; the blades are not in it",
+    "core50_s08_o11_010": "the mask takes the blade only; the handles are cut off",
+    "core50_s02_o13_008": "the mask takes a strip of the blade and the wall beside it; the handles are cut off",
+    "core50_s09_o26_019": "the mask takes one lens only",
+    "core50_s09_o45_008": "the mask takes the handle and a sliver of the cup only",
 }
 
 
@@ -97,10 +105,17 @@ def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | P
     return out
 
 
+def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:
+    """The look-alike set; the approach variant without the photos ``CORE50_BAD_MASKS`` names (see there)."""
+    leave_out = CORE50_BAD_MASKS if variant == "approach" else ()
+    return lookalike_set.build(out, src, variant=variant, seed=seed, overwrite=overwrite, leave_out=leave_out)
+
+
 SOURCE = register(DataSource(
     name="core50",
     summary="real look-alikes shipped with pin_match: CORe50 photos of 10 categories of hand-held objects, as "
-            "shot or pasted into TUM office rooms (docs/lookalike-set.md)",
+            "shot, pasted into TUM office rooms, or pasted as walks that approach the target (approach: the demo's "
+            "real set; docs/lookalike-set.md)",
     licence="CC BY 4.0 (CORe50, Lomonaco & Maltoni 2017; TUM RGB-D rooms, Sturm et al. 2012)",
-    variants=lookalike_set.VARIANTS, make=lookalike_set.build, src=SRC_OPTIONAL,
+    variants=lookalike_set.VARIANTS, make=_make, src=SRC_OPTIONAL,
     prepare_inputs=("CORE50_REPO", "ROOMS_REPO"), make_source=prepare_core50))

@@ -138,24 +138,24 @@ def prepare_grocery(grocery_repo: str | Path, out: str | Path, *, photos_per_pro
             mask = plain_background_mask(read_image(checkout.root / p.iconic))
             if not mask.any():
                 raise LookalikeError(f"iconic image {checkout.root / p.iconic} shows nothing on its plain background")
-            rows.append(_photo_row(checkout, stage, p, f"{p.instance_id}_iconic", p.iconic, mask, split[p.instance_id],
-                                   REFERENCE_USE))
+            row = _photo_row(checkout, stage, p, f"{p.instance_id}_iconic", p.iconic, mask)
+            rows.append({**row, "split": split[p.instance_id], "use": REFERENCE_USE})
             for photo in spread(p.photos, photos_per_product):
                 photo_id = f"grocery_{photo.parts[1]}_{photo.stem.lower()}"  # dataset/<folder>/.../<name>.jpg
-                rows.append(_photo_row(checkout, stage, p, photo_id, photo,
-                                       object_mask(read_image(checkout.root / photo)), split[p.instance_id], ""))
+                row = _photo_row(checkout, stage, p, photo_id, photo, object_mask(read_image(checkout.root / photo)))
+                rows.append({**row, "split": split[p.instance_id], "use": ""})
         return rows
 
     return write_source_folder(out, write_photos, lambda rows, rooms: _notice(checkout, products, rows, rooms),
                                overwrite=overwrite)
 
 
-def _photo_row(checkout: Checkout, stage: Path, product: Product, photo_id: str, path: Path, mask: np.ndarray,
-               split: str, use: str) -> dict[str, str]:
+def _photo_row(checkout: Checkout, stage: Path, product: Product, photo_id: str, path: Path,
+               mask: np.ndarray) -> dict[str, str]:
+    """Copy one photo and write its mask; its photos.csv row without split and use."""
     file, mask_file = add_photo(stage, photo_id, (checkout.root / path).read_bytes(), path.suffix.lower(), mask)
     return dict(photo_id=photo_id, instance_id=product.instance_id, category=product.category, file=file,
-                mask=mask_file, source=checkout.source, source_path=path.as_posix(), licence=GROCERY_LICENCE,
-                split=split, use=use)
+                mask=mask_file, source=checkout.source, source_path=path.as_posix(), licence=GROCERY_LICENCE)
 
 
 def _notice(checkout: Checkout, products: list[Product], rows: list[dict], room_rows: list[dict]) -> str:

@@ -6,11 +6,16 @@ on their own, so a default chosen on it is chosen on the problem PIN poses.
 
 A source folder (its layout: ``pin_match.data.sources.photo_folder``) holds real photos, their
 masks and empty room photos. The sources ``core50`` (shipped), ``grocery``, ``myvlm`` and ``twins``
-write one (see docs/lookalike-set.md); ``build`` turns it into a frame-set in one of two variants:
+write one (see docs/lookalike-set.md); ``build`` turns it into a frame-set in one of three variants:
 
 - ``shot``: the photo is the frame (letterboxed into the 640x360 portrait frame, grey bars), so
   the object keeps its real surroundings, hand and lighting;
-- ``pasted``: the object is cut out with its mask and pasted into a real indoor room photo.
+- ``pasted``: the object is cut out with its mask and pasted into a real indoor room photo;
+- ``approach``: pasted, as a walk through one room that ends at the target, as PIN's episodes
+  do: the look-alikes, other objects and empty views first (in random order), then each target
+  photo at ``APPROACH_DISTANCES_M``, far to near; and the splits of ``balanced_splits``, so
+  each split has its share of the instances that can be targets (the set for a table that
+  needs many val target frames).
 
 One episode per target instance that has a same-category look-alike and at least two photos: its
 3 reference views come from its first photos (RGBA, alpha = mask), its frames are its other photos,
@@ -25,8 +30,8 @@ same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Collection, Sequence
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
@@ -50,6 +55,7 @@ from pin_match.data.sources.photo_folder import (
     ROOM_COLUMNS,
     LookalikeError,
     Photo,
+    balanced_splits,
     instance_splits,
     load_photos,
     read_csv,
@@ -57,7 +63,7 @@ from pin_match.data.sources.photo_folder import (
 from pin_match.data.writer import FrameSetWriter
 
 LOOKALIKES_VERSION = 1
-VARIANTS = ("shot", "pasted")
+VARIANTS = ("shot", "pasted", "approach")
 N_REFERENCE_PHOTOS = 3
 N_OTHER_FRAMES = 4
 N_EMPTY_FRAMES = 3
@@ -67,6 +73,7 @@ N_EMPTY_FRAMES = 3
 PIN_FOCAL_PX = 180 / np.tan(np.radians(21))
 PASTE_OBJECT_M = 0.6  # the larger personal objects of PIN (a backpack, a bag, a teddy bear)
 PASTE_DISTANCE_M = (1.0, 3.0)
+APPROACH_DISTANCES_M = (3.0, 2.6, 2.2, 1.8, 1.4, 1.0)  # an approach shows each target photo at these, far to near
 
 
 # ------------------------------------------------------------------ plan
@@ -77,6 +84,8 @@ class EpisodePlan:
     target: str
     reference_photos: tuple[str, ...]
     frames: tuple[tuple[str, str], ...]  # (kind, photo_id or room_id); kind in target, lookalike, other, empty
+    distances: tuple[float | None, ...] = ()  # approach: metres per frame (None: drawn); else empty
+    room: str = ""  # approach: the one room the walk is in
 
 
 def reference_photos(own: Sequence[Photo], *, keep_one: bool) -> list[Photo]:
@@ -91,13 +100,15 @@ def reference_photos(own: Sequence[Photo], *, keep_one: bool) -> list[Photo]:
     return list(own[:min(N_REFERENCE_PHOTOS, len(own) - 1 if keep_one else len(own))])
 
 
-def plan_episodes(photos: Sequence[Photo], room_ids: Sequence[str], seed: int = 0) -> list[EpisodePlan]:
+def plan_episodes(photos: Sequence[Photo], room_ids: Sequence[str], seed: int = 0,
+                  split: dict[str, str] | None = None) -> list[EpisodePlan]:
     """One episode per instance with photos for its references and its frames and a same-split look-alike.
 
     Look-alikes are the other instances of its category. Photos marked ``use=reference`` are
-    never frames, of their own episode or of another.
+    never frames, of their own episode or of another. ``split``: each instance's split
+    (default ``instance_splits``).
     """
-    split = instance_splits(photos)
+    split = split or instance_splits(photos)
     by_instance: dict[str, list[Photo]] = {}
     for p in sorted(photos, key=lambda p: p.photo_id):
         by_instance.setdefault(p.instance_id, []).append(p)
@@ -128,6 +139,20 @@ def plan_episodes(photos: Sequence[Photo], room_ids: Sequence[str], seed: int = 
     return plans
 
 
+def approach_plan(plan: EpisodePlan, room_ids: Sequence[str], seed: int = 0) -> EpisodePlan:
+    """``plan`` as a walk in one room that meets everything else first and ends at its target.
+
+    The frames that are not the target keep their random order (empty views show the walk's
+    room); then each target photo follows at every distance of ``APPROACH_DISTANCES_M``.
+    """
+    rng = np.random.default_rng(stable_seed(seed, "approach", plan.episode_id))
+    room = room_ids[int(rng.integers(len(room_ids)))]
+    met = [(kind, room if kind == "empty" else item) for kind, item in plan.frames if kind != "target"]
+    targets = [item for kind, item in plan.frames if kind == "target"]
+    return replace(plan, frames=(*met, *(("target", t) for t in targets for _ in APPROACH_DISTANCES_M)),
+                   distances=(*(None,) * len(met), *(APPROACH_DISTANCES_M * len(targets))), room=room)
+
+
 # ------------------------------------------------------------------ images
 def reference_views(cutouts: Sequence[np.ndarray]) -> list[np.ndarray]:
     """Three views: one per reference photo; fewer photos are filled with their mirror images."""
@@ -139,15 +164,16 @@ def reference_views(cutouts: Sequence[np.ndarray]) -> list[np.ndarray]:
     return views
 
 
-def paste_into(room: np.ndarray, obj: np.ndarray, rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """Paste an RGBA cut-out at a random distance and position (the pasted variant).
+def paste_into(room: np.ndarray, obj: np.ndarray, rng: np.random.Generator,
+               distance: float | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Paste an RGBA cut-out at ``distance`` metres (default: drawn) and a random position (pasted, approach).
 
-    The distance is drawn in ``PASTE_DISTANCE_M`` and the cut-out's longer side made what
+    The distance is drawn in ``PASTE_DISTANCE_M`` unless given, and the cut-out's longer side made what
     PIN's camera shows of a ``PASTE_OBJECT_M`` object there (94-281 px): the size of the
     objects PIN asks for at the distances it is seen from, not the few dozen pixels a mug
     would take (the 128 px photos hold no detail at that size).
     """
-    size = PIN_FOCAL_PX * PASTE_OBJECT_M / float(rng.uniform(*PASTE_DISTANCE_M))
+    size = PIN_FOCAL_PX * PASTE_OBJECT_M / (float(rng.uniform(*PASTE_DISTANCE_M)) if distance is None else distance)
     h, w = obj.shape[:2]
     s = size / max(h, w)
     nw, nh = min(max(int(round(w * s)), 1), FRAME_WIDTH), min(max(int(round(h * s)), 1), FRAME_HEIGHT)
@@ -166,21 +192,25 @@ def _descriptions(instance_id: str, category: str) -> list[str]:
 
 # ------------------------------------------------------------------ build
 def build(out: str | Path, src: str | Path | None = None, *, variant: str = "shot", seed: int = 0,
-          overwrite: bool = False) -> FrameSet:
-    """Write the look-alike frame-set of ``variant`` (``shot`` or ``pasted``) from source folder ``src``.
+          overwrite: bool = False, leave_out: Collection[str] = ()) -> FrameSet:
+    """Write the look-alike frame-set of ``variant`` (``VARIANTS``) from source folder ``src``.
 
     Without ``src``, the source folder shipped inside the package (``PACKAGED_SRC``) is used,
-    so the set builds on any install, offline.
+    so the set builds on any install, offline. Photos whose id is in ``leave_out`` are not used
+    (the frame-set's provenance lists them).
     """
     if variant not in VARIANTS:
         raise LookalikeError(f"unknown variant {variant!r}; choose one of {list(VARIANTS)}")
     src = Path(src) if src is not None else PACKAGED_SRC
-    photos = load_photos(src)
+    every_photo = load_photos(src)
+    photos = [p for p in every_photo if p.photo_id not in leave_out]
     rooms = read_csv(src / "rooms.csv", ROOM_COLUMNS)
     room_file = {r["room_id"]: src / r["file"] for r in rooms}
     by_id = {p.photo_id: p for p in photos}
-    plans = plan_episodes(photos, sorted(room_file), seed)
-    split = instance_splits(photos)
+    split = balanced_splits(photos) if variant == "approach" else instance_splits(photos)
+    plans = plan_episodes(photos, sorted(room_file), seed, split)
+    if variant == "approach":
+        plans = [approach_plan(p, sorted(room_file), seed) for p in plans]
 
     def image_and_mask(photo_id: str) -> tuple[np.ndarray, np.ndarray]:
         p = by_id[photo_id]
@@ -196,6 +226,8 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
     provenance = dict(generator="pin_match.lookalikes", version=LOOKALIKES_VERSION, variant=variant, seed=seed,
                       source=str(src.name), photos=len(photos), rooms=len(rooms),
                       frame_size=[FRAME_HEIGHT, FRAME_WIDTH])
+    if len(photos) < len(every_photo):
+        provenance["left_out"] = sorted(p.photo_id for p in every_photo if p.photo_id in leave_out)
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance, image_ext=".png")
     with writer:
         for inst in sorted(used):
@@ -215,7 +247,7 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
                     image = room_crop(read_image(room_file[item]), rng)
                     writer.add_frame(plan.episode_id, step, image, np.zeros(image.shape[:2], np.uint16), {})
                     continue
-                image, frame_mask = _object_frame(*image_and_mask(item), variant, room_file, rng)
+                image, frame_mask = _object_frame(*image_and_mask(item), variant, plan, step, room_file, rng)
                 inst = by_id[item].instance_id
                 writer.add_frame(plan.episode_id, step, image, frame_mask, {1: (inst, roles[inst])})
         return writer.close()
@@ -232,11 +264,15 @@ def _objects_used(plans: Sequence[EpisodePlan], by_id: dict[str, Photo]) -> dict
     return used
 
 
-def _object_frame(rgb: np.ndarray, mask: np.ndarray, variant: str, room_file: dict[str, Path],
-                  rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A photo as the frame (``shot``), or its object pasted into a room (``pasted``); with the object's mask."""
+def _object_frame(rgb: np.ndarray, mask: np.ndarray, variant: str, plan: EpisodePlan, step: int,
+                  room_file: dict[str, Path], rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
+    """A photo as the frame (``shot``), or its object pasted into a room (``pasted``: a random room; ``approach``:
+    the walk's room, at the plan's distance); with the object's mask."""
     if variant == "shot":
         return letterbox(rgb, mask, rng)
+    if variant == "approach":
+        room = room_crop(read_image(room_file[plan.room]), rng)
+        return paste_into(room, cutout(rgb, mask), rng, plan.distances[step])
     room = room_crop(read_image(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)
     return paste_into(room, cutout(rgb, mask), rng)
 

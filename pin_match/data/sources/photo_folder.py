@@ -109,6 +109,36 @@ def instance_splits(photos: Sequence[Photo]) -> dict[str, str]:
     return out
 
 
+def balanced_splits(photos: Sequence[Photo]) -> dict[str, str]:
+    """train / val per instance, giving each split its share of the instances with two photos or more.
+
+    Only an instance with a photo left after its references can be a target, and the hash
+    rule of ``instance_splits`` can send most of them to one split (the shipped CORe50 photos:
+    9 targets train, 4 val). Here a category of ``MIN_INSTANCES_TO_HALVE`` or more instances is
+    dealt out alternately, most-photographed first; a smaller one goes whole to one split, so
+    its instances keep their look-alikes; each category starts with the split that holds fewer
+    such instances so far (categories in order of size, then name). A source that fixes splits
+    keeps them (``instance_splits``).
+    """
+    if any(p.split for p in photos):
+        return instance_splits(photos)
+    by_category: dict[str, dict[str, int]] = {}
+    for p in photos:
+        counts = by_category.setdefault(p.category, {})
+        counts[p.instance_id] = counts.get(p.instance_id, 0) + 1
+    out: dict[str, str] = {}
+    load = dict.fromkeys(SPLITS, 0)  # instances with two photos or more, per split
+    for category in sorted(by_category, key=lambda c: (-len(by_category[c]), c)):
+        counts = by_category[category]
+        ranked = sorted(counts, key=lambda i: (-counts[i], stable_seed("split", i), i))
+        first = min(SPLITS, key=lambda s: (load[s], s))
+        order = (first, *(s for s in SPLITS if s != first))
+        for k, instance in enumerate(ranked):
+            out[instance] = order[k % 2] if len(ranked) >= MIN_INSTANCES_TO_HALVE else first
+            load[out[instance]] += counts[instance] >= 2
+    return out
+
+
 def category_splits(instances: Sequence) -> dict[str, str]:
     """train / val per instance (anything with ``instance_id`` and ``category``) of a downloaded source.
 
