@@ -101,7 +101,7 @@ def test_unknown_matcher_suggests_close_names():
 
 def test_builtins_resolve_without_importing_their_module_first():
     for name in ("sift", "color"):
-        sys.modules.pop("pin_match.matchers.classic", None)
+        sys.modules.pop(f"pin_match.matchers.{name}", None)  # the module is named after its matcher
         registry._REGISTRY.pop(name, None)
         assert create_matcher(name).name == name
     assert {"sift", "color", "dino", "dinov2", "clip", "clip-text", "superglue", "owl", "persam"} <= \
