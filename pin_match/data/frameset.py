@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
 
@@ -44,21 +45,21 @@ def view_files(object_dir: Path) -> list[Path]:
     return sorted(p for p in object_dir.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES)
 
 
+@dataclass(eq=False, repr=False)
 class FrameSet:
-    """A validated frame-set: pandas tables in memory, images read lazily."""
+    """A validated frame-set: pandas tables in memory, images read lazily (``load`` builds one)."""
 
-    def __init__(self, root: Path, manifest: dict, objects: pd.DataFrame, descriptions: dict,
-                 episodes: pd.DataFrame, episode_records: list[dict], frames: pd.DataFrame,
-                 visibility: pd.DataFrame) -> None:
-        self.root = root
-        self.manifest = manifest
-        self.objects = objects
-        self.descriptions = descriptions
-        self.episodes = episodes
-        self.episode_records = episode_records
-        self.frames = frames
-        self.visibility = visibility
-        self._frame_index = frames.set_index("frame_id")
+    root: Path
+    manifest: dict
+    objects: pd.DataFrame
+    descriptions: dict
+    episodes: pd.DataFrame
+    episode_records: list[dict]
+    frames: pd.DataFrame
+    visibility: pd.DataFrame
+
+    def __post_init__(self) -> None:
+        self._frame_index = self.frames.set_index("frame_id")
 
     # ----------------------------------------------------------------- loading
     @classmethod
