@@ -57,7 +57,7 @@ def start_clients(matcher, warm_fs) -> tuple[dict, dict]:
         clients[label].wait_for_workers(len(clients[label].nthreads()) or 1)
         t1 = time.perf_counter()
         with tempfile.TemporaryDirectory() as tmp:
-            score_to_file(warm_fs.root, matcher, out=tmp, client=clients[label], run=RunOptions(progress=False))
+            score_to_file(warm_fs.root, matcher, out=tmp, run=RunOptions(progress=False, client=clients[label]))
         startup[label] = {"start_s": round(t1 - t0, 2), "cold_run_s": round(time.perf_counter() - t1, 2)}
     return clients, startup
 
@@ -98,8 +98,8 @@ def run(quick: bool = False) -> dict:
                 for setup in SETUPS:
                     out = Path(tmp) / f"{setup}-{n}".replace(" ", "_")
                     c0, t0 = cpu_seconds(), time.perf_counter()
-                    score_to_file(framesets[n].root, matcher, out=out, client=clients.get(setup),
-                                  run=RunOptions(workers=1, progress=False))
+                    score_to_file(framesets[n].root, matcher, out=out,
+                                  run=RunOptions(workers=1, progress=False, client=clients.get(setup)))
                     wall = time.perf_counter() - t0
                     seconds[setup][n], busy[setup][n] = round(wall, 3), round((cpu_seconds() - c0) / wall, 2)
                     print(f"  {setup:<24} {n:5d} frames {seconds[setup][n]:8.2f} s, {busy[setup][n]:.2f} cores busy",

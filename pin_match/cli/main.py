@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from pin_match import outputs
@@ -62,7 +63,7 @@ def _cmd_score(a: argparse.Namespace) -> None:
         from pin_match.scoring.cluster import connect
 
         with connect(a.scheduler, workers=a.workers, timeout=a.scheduler_timeout) as client:
-            path = score_to_file(a.frameset, a.matcher, client=client, **kwargs)
+            path = score_to_file(a.frameset, a.matcher, **{**kwargs, "run": replace(kwargs["run"], client=client)})
     else:
         path = score_to_file(a.frameset, a.matcher, **kwargs)
     s = pd.read_parquet(path, columns=["score"]).score

@@ -28,22 +28,25 @@ from pin_match.scoring.schema import chunk_path
 from pin_match.scoring.table import ScoreTable
 
 
-def score(frameset: FrameSet | str | Path, matcher: Matcher | str, **kwargs) -> ScoreTable:
+def score(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
+          split: str | None = None, out: str | Path = outputs.SCORES, shard: Shard | str | None = None,
+          run: RunOptions = DEFAULT_RUN) -> ScoreTable:
     """Score every frame of ``split`` (cached); returns the score table and writes it under ``out``.
 
-    Keyword arguments are those of ``score_to_file``.
+    The arguments are those of ``score_to_file``.
     """
-    return ScoreTable.read(score_to_file(frameset, matcher, **kwargs))
+    return ScoreTable.read(score_to_file(frameset, matcher, overrides=overrides, split=split, out=out, shard=shard,
+                                         run=run))
 
 
 def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, overrides: dict | None = None,
                   split: str | None = None, out: str | Path = outputs.SCORES, shard: Shard | str | None = None,
-                  run: RunOptions = DEFAULT_RUN, client=None) -> Path:
+                  run: RunOptions = DEFAULT_RUN) -> Path:
     """Score (or find in the cache) and return the table's path; memory stays flat in the number of frames.
 
     ``overrides`` configure a matcher given by name (weights included: ``registry.with_weights``).
-    With a ``distributed.Client`` the episodes are scored on its cluster (``run.workers`` is then
-    unused), into the same cache and the same table bytes.
+    ``shard`` ("K/N") scores one part of the episodes. With ``run.client`` (a ``distributed.Client``)
+    the episodes are scored on its cluster, into the same cache and the same table bytes.
     """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(matcher, str):
@@ -61,10 +64,10 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
         return final
     chunks = atomic.ensure_dir(root / "chunks")
     with _progress(part, episode_ids, run.progress, matcher) as bar:
-        if client is not None:
+        if run.client is not None:
             from pin_match.scoring.cluster import score_episodes
 
-            score_episodes(client, part, matcher, episode_ids, chunks, run.batch_size, bar)
+            score_episodes(run.client, part, matcher, episode_ids, chunks, run.batch_size, bar)
         else:
             score_here(part, matcher, episode_ids, chunks, run.batch_size,
                        run.workers or min(2, os.cpu_count() or 1), bar)
