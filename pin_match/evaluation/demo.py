@@ -39,10 +39,10 @@ def synthetic(out: Path, seed: int, run: RunOptions) -> FrameSet:
 
 
 def lookalikes(out: Path, seed: int, run: RunOptions) -> FrameSet:
-    """The CORe50 look-alikes pasted into real rooms, from the photos shipped with pin_match."""
+    """The CORe50 look-alikes pasted along approach walks through real rooms (the photos shipped with pin_match)."""
     from pin_match.data.sources import get
 
-    return get("core50").build(out, "pasted", seed)
+    return get("core50").build(out, "approach", seed)
 
 
 @dataclass(frozen=True)
@@ -61,8 +61,9 @@ class DemoSet:
 DEMO_SETS = (
     DemoSet("synthetic", "", "the synthetic val split (rendered PIN-like rooms)", synthetic, ("color", "xfeat")),
     DemoSet("look-alikes", "lookalikes",
-            "real photos: val instances of CORe50 objects pasted into real rooms, each target among real look-alikes "
-            "of its category (AUROC-same: target vs look-alike frames)", lookalikes, ("verify", "effnet", "color")),
+            "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet real "
+            "look-alikes of the target's category first and end at the target (AUROC-same: target vs look-alike "
+            "frames)", lookalikes, ("verify", "effnet", "color")),
 )
 
 
