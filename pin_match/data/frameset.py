@@ -193,6 +193,12 @@ def _read_table(path: Path, required: list[str]) -> pd.DataFrame:
     if not path.exists():
         raise FrameSetError(f"missing file {path}")
     try:
+        if path.suffix == ".parquet":
+            import pyarrow.parquet as pq
+
+            # parquet keeps no checksum: a damaged byte inside a text cell reads fine and fails later, when the
+            # text is decoded, as a library's traceback; full validation finds it here (invalid UTF-8)
+            pq.read_table(path).validate(full=True)
         df = pd.read_csv(path, dtype=str, keep_default_na=False) if path.suffix == ".csv" else pd.read_parquet(path)
     except Exception as exc:  # pyarrow and pandas raise many kinds on a damaged file
         raise FrameSetError(f"cannot read table {path}: {exc}") from exc
