@@ -8,43 +8,28 @@ import socket
 import threading
 import time
 import warnings
-from dataclasses import dataclass
+from dataclasses import replace
 from pathlib import Path
 
 import pytest
+import toys  # noqa: F401  (registers test-slow and test-nan-for; the workers import it too)
 from distributed import Client, LocalCluster
-from slow_plugin import SlowConfig, SlowMatcher
 
 from pin_match.cli import main
 from pin_match.contract.matcher import MatcherError
-from pin_match.contract.registry import create_matcher, register_matcher
+from pin_match.contract.registry import create_matcher
 from pin_match.scoring import RunOptions, score
 from pin_match.scoring.cluster import DistributedError, MatcherSpec, _malloc_setting, connect, task_groups
 
 QUIET = RunOptions(progress=False)
 
+
+def on(client, kw: dict) -> dict:
+    """The same keyword arguments of ``score``, its episodes run on ``client``'s cluster."""
+    return {**kw, "run": replace(kw["run"], client=client)}
+
+
 TESTS = Path(__file__).parent
-
-
-@dataclass
-class NanConfig(SlowConfig):
-    bad_target: str = ""
-
-
-@register_matcher("test-nan-for")
-class NanForTarget(SlowMatcher):
-    """test-slow, but every score is NaN while prepared for ``bad_target``: a matcher error on one episode."""
-
-    Config = NanConfig
-
-    def _prepare(self, target):
-        self.bad = target.object_id == self.cfg.bad_target
-
-    def _match_crops(self, crops):
-        results = super()._match_crops(crops)
-        for r in results:
-            r.score = float("nan") if self.bad else r.score
-        return results
 
 
 @pytest.fixture(scope="module")
@@ -82,7 +67,7 @@ def test_cluster_table_is_the_local_bytes_and_each_path_resumes_the_other(tiny_f
     reference = _bytes(tmp_path / "local")
 
     log.unlink(missing_ok=True)
-    score(tiny_frameset, "test-slow", out=tmp_path / "cluster", client=client, overrides={"delay": 0.0})
+    score(tiny_frameset, "test-slow", out=tmp_path / "cluster", run=RunOptions(client=client), overrides={"delay": 0.0})
     assert _bytes(tmp_path / "cluster") == reference
     assert "8/8" in capsys.readouterr().err  # the bar counts frames over the completed tasks
     assert sorted(t for _, t in _prepares(log)) == ["mug_a", "mug_c"]
@@ -91,12 +76,12 @@ def test_cluster_table_is_the_local_bytes_and_each_path_resumes_the_other(tiny_f
     # a local run stopped after episode ep_train (its shard wrote that chunk), finished on the cluster
     score(tiny_frameset, "test-slow", out=tmp_path / "to_cluster", shard="0/2", **kw)
     log.unlink()
-    score(tiny_frameset, "test-slow", out=tmp_path / "to_cluster", client=client, **kw)
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_cluster", **on(client, kw))
     assert _bytes(tmp_path / "to_cluster") == reference
     assert [t for _, t in _prepares(log)] == ["mug_c"]
 
     # and the reverse: a cluster run stopped after ep_train, finished here
-    score(tiny_frameset, "test-slow", out=tmp_path / "to_local", shard="0/2", client=client, **kw)
+    score(tiny_frameset, "test-slow", out=tmp_path / "to_local", shard="0/2", **on(client, kw))
     log.unlink()
     score(tiny_frameset, "test-slow", out=tmp_path / "to_local", **kw)
     assert _bytes(tmp_path / "to_local") == reference
@@ -113,7 +98,7 @@ def test_a_damaged_chunk_is_named_and_scored_again_on_the_cluster(tiny_frameset,
     chunk.write_bytes(b"abc")
     kept = train.stat().st_mtime_ns
     capsys.readouterr()
-    score(tiny_frameset, "test-slow", out=tmp_path / "local", client=client, **kw)
+    score(tiny_frameset, "test-slow", out=tmp_path / "local", **on(client, kw))
     assert _bytes(tmp_path / "local") == reference
     err = capsys.readouterr().err
     assert err.count("damaged score chunk") == 1 and "ep_val.parquet" in err and "Traceback" not in err
@@ -125,7 +110,7 @@ def test_a_matcher_error_stops_the_run_naming_the_frames_as_locally(tiny_framese
     with pytest.raises(MatcherError) as local:
         score(tiny_frameset, "test-nan-for", out=tmp_path / "local", **kw)
     with pytest.raises(MatcherError) as remote:
-        score(tiny_frameset, "test-nan-for", out=tmp_path / "cluster", client=client, **kw)
+        score(tiny_frameset, "test-nan-for", out=tmp_path / "cluster", **on(client, kw))
     assert "non-finite score" in str(remote.value)
     assert "(episode 'ep_val', frames ep_val_0000..ep_val_0003)" in str(remote.value)
     assert str(remote.value) == str(local.value)
@@ -179,11 +164,11 @@ def test_local_workers_keep_glibcs_allocator_and_a_run_on_dask_defaults_says_so(
     with connect("local", workers=1) as local, warnings.catch_warnings(record=True) as seen:
         warnings.simplefilter("always")
         assert local.run(_malloc_setting) == {address: None for address in local.nthreads()}
-        score(tiny_frameset, "test-slow", out=tmp_path / "local", client=local, **kw)
+        score(tiny_frameset, "test-slow", out=tmp_path / "local", **on(local, kw))
     assert not [w for w in seen if "MALLOC_TRIM_THRESHOLD_" in str(w.message)]
     with pytest.warns(UserWarning, match=r"^2 of 2 Dask workers \(e\.g\. tcp://.*\) run with "
                                          r"MALLOC_TRIM_THRESHOLD_=65536, Dask's nanny default, .* 2x slower"):
-        score(tiny_frameset, "test-slow", out=tmp_path / "default", client=client, **kw)
+        score(tiny_frameset, "test-slow", out=tmp_path / "default", **on(client, kw))
 
 
 def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tmp_path, client, log):
@@ -192,8 +177,8 @@ def test_a_worker_killed_mid_episode_is_scored_again_elsewhere(tiny_frameset, tm
     log.unlink(missing_ok=True)
     result: dict = {}
     run = threading.Thread(target=lambda: result.update(table=score(
-        tiny_frameset, "test-slow", overrides={"delay": 0.5}, out=tmp_path / "cluster", client=client,
-        run=QUIET)))
+        tiny_frameset, "test-slow", overrides={"delay": 0.5}, out=tmp_path / "cluster",
+        run=replace(QUIET, client=client))))
     run.start()
     deadline = time.monotonic() + 120
     while not _prepares(log) and time.monotonic() < deadline:
@@ -237,7 +222,7 @@ def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_fram
 
         def run() -> None:
             try:
-                score(tiny_frameset, "test-slow", out=out, client=client, **kw)
+                score(tiny_frameset, "test-slow", out=out, **on(client, kw))
             except Exception as exc:  # the error is the assertion below
                 result["error"] = exc
 

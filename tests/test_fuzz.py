@@ -14,42 +14,19 @@ from __future__ import annotations
 import json
 import shutil
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from toys import write_recording
 
-from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.cli import main
 
 FRAMESET_CASES = 40
 RECORDING_CASES = 60
 WRONG_VALUES = st.sampled_from([None, "", "x", -1, 0, 3.5, 10**12, [], {}, ["a"], {"a": 1}, True, "../../etc"])
-
-
-@dataclass
-class FuzzConfig(CropConfig):
-    pass
-
-
-@register_matcher("test-fuzz-mean")
-class MeanMatcher(CropMatcher):
-    """Score = mean brightness / 255 of the crop: reads every frame, costs nothing."""
-
-    Config = FuzzConfig
-    modality = Modality.VISUAL
-    default_sigma = 0.3
-
-    def _prepare(self, target):
-        pass
-
-    def _match_crops(self, crops):
-        return [MatchResult(score=float(c.mean()) / 255.0, points=np.array([[1.0, 1.0]], np.float32),
-                            point_scores=np.array([float(c.mean()) / 255.0], np.float32)) for c in crops]
 
 
 # ------------------------------------------------------------------ damages
@@ -167,14 +144,15 @@ def test_damaged_frameset_ends_in_a_named_error(frameset_files, capsys, data):
         for kind, file, arg in plan:
             _damage(root / file, kind, arg)
         out = Path(tmp) / "scores"
-        rc = main(["score", str(root), "--matcher", "test-fuzz-mean", "--out", str(out), "--quiet", "--workers", "1"])
+        rc = main(["score", str(root), "--matcher", "test-slow", "--cfg", "delay=0", "--out", str(out), "--quiet",
+                   "--workers", "1"])
         _check_outcome(capsys, rc, "score")
         tables = list(out.rglob("scores_all.parquet")) if out.exists() else []
         assert not [p for p in out.rglob("*.tmp")] if out.exists() else True
         if rc != 0:
             assert not tables  # no table of a failed run
             return
-        rc = main(["report", str(tables[0]), "--frameset", str(root), "--threshold", "0.3", "--bootstrap", "5",
+        rc = main(["report", str(tables[0]), "--frameset", str(root), "--threshold", "100", "--bootstrap", "5",
                    "--out", str(Path(tmp) / "report")])
         _check_outcome(capsys, rc, "report")
         if rc != 0:
@@ -182,41 +160,10 @@ def test_damaged_frameset_ends_in_a_named_error(frameset_files, capsys, data):
 
 
 # ------------------------------------------------------------------ recordings
-def _write_recording(root: Path) -> tuple[Path, Path]:
-    import cv2
-
-    from conftest import make_view
-
-    rng = np.random.default_rng(0)
-    objects = root / "objects"
-    descriptions = {}
-    for oid, color in (("obj_t", (200, 20, 20)), ("obj_s", (20, 200, 20)), ("obj_o", (20, 20, 200))):
-        folder = objects / "objects_images" / oid
-        folder.mkdir(parents=True)
-        for k in range(3):
-            cv2.imwrite(str(folder / f"{oid}_{k}.png"), cv2.cvtColor(make_view(color, size=32), cv2.COLOR_RGBA2BGRA))
-        descriptions[oid] = [f"{oid} description {k}" for k in range(3)]
-    (objects / "objects_descriptions.json").write_text(json.dumps(descriptions))
-    rec = root / "rec"
-    rec.mkdir()
-    episodes = [dict(episode_id="7", scene_id="s", split="val", goals=[dict(object_id="obj_t", object_category="mug")],
-                     distractors=[dict(object_id="obj_s", object_category="mug"),
-                                  dict(object_id="obj_o", object_category="ball")])]
-    (rec / "episodes.json").write_text(json.dumps({"episodes": episodes}))
-    for step in range(2):
-        for sub in ("rgb", "semantic", "depth"):
-            (rec / "7" / sub).mkdir(parents=True, exist_ok=True)
-        cv2.imwrite(str(rec / "7" / "rgb" / f"{step}.png"), rng.integers(0, 255, (24, 16, 3), dtype=np.uint8))
-        np.save(rec / "7" / "semantic" / f"{step}.npy",
-                rng.choice([0, 100000, 100001, 100002], size=(24, 16)).astype(np.int64))
-        np.save(rec / "7" / "depth" / f"{step}.npy", rng.uniform(0.5, 5.0, (24, 16)).astype(np.float32))
-    return rec, objects
-
-
 @pytest.fixture(scope="module")
 def recording_files(tmp_path_factory):
     root = tmp_path_factory.mktemp("recording")
-    _write_recording(root)
+    write_recording(root, steps=2, shape=(24, 16), view_size=32)
     return root, [p.relative_to(root) for p in _files(root)]
 
 

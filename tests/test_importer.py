@@ -7,6 +7,7 @@ import json
 import cv2
 import numpy as np
 import pytest
+from toys import write_recording
 
 from conftest import make_view
 from pin_match.data.frameset import FrameSetError
@@ -15,37 +16,7 @@ from pin_match.data.importer import import_recording
 
 @pytest.fixture
 def recording(tmp_path):
-    rng = np.random.default_rng(0)
-    objects = tmp_path / "objects"
-    descriptions = {}
-    for oid, color in (("obj_t", (200, 20, 20)), ("obj_s", (20, 200, 20)), ("obj_o", (20, 20, 200))):
-        folder = objects / "objects_images" / oid
-        folder.mkdir(parents=True)
-        for k in range(3):
-            cv2.imwrite(str(folder / f"{oid}_{k}.png"), cv2.cvtColor(make_view(color), cv2.COLOR_RGBA2BGRA))
-        descriptions[oid] = [f"{oid} description {k}" for k in range(3)]
-    (objects / "objects_descriptions.json").write_text(json.dumps(descriptions))
-    rec = tmp_path / "rec"
-    rec.mkdir()
-    episodes = [dict(episode_id="7", scene_id="sceneA",
-                     goals=[dict(object_id="obj_t", object_category="mug")],
-                     distractors=[dict(object_id="obj_s", object_category="mug"),
-                                  dict(object_id="obj_o", object_category="ball")])]
-    (rec / "episodes.json").write_text(json.dumps({"episodes": episodes}))
-    semantics = []
-    for step in range(3):
-        for sub in ("rgb", "semantic", "depth"):
-            (rec / "7" / sub).mkdir(parents=True, exist_ok=True)
-        rgb = rng.integers(0, 255, (64, 48, 3), dtype=np.uint8)
-        sem = rng.choice([0, 5, 100000, 100001, 100002], size=(64, 48)).astype(np.int64)
-        if step == 2:
-            sem[sem == 100000] = 0  # a frame without the target
-        depth = rng.uniform(0.5, 5.0, (64, 48)).astype(np.float32)
-        cv2.imwrite(str(rec / "7" / "rgb" / f"{step}.png"), rgb)
-        np.save(rec / "7" / "semantic" / f"{step}.npy", sem)
-        np.save(rec / "7" / "depth" / f"{step}.npy", depth)
-        semantics.append((sem, depth))
-    return rec, objects, semantics
+    return write_recording(tmp_path)
 
 
 def test_import_matches_semantic_frames_pixel_for_pixel(recording, tmp_path):

@@ -1,4 +1,4 @@
-"""The registry finds built-ins by name, plugs in a matcher defined right here, and explains mistakes."""
+"""The registry finds built-ins by name, plugs in a toy matcher of the tests, and explains mistakes."""
 
 from __future__ import annotations
 
@@ -8,55 +8,20 @@ import re
 import sys
 import textwrap
 import types
-from dataclasses import dataclass
 from importlib.metadata import EntryPoint
 
 import numpy as np
 import pytest
+from toys import BrightMatcher, HandSet
 
-from pin_match import (
-    Matcher,
-    MatcherConfig,
-    MatchResult,
-    Modality,
-    create_matcher,
-    list_matchers,
-    register_matcher,
-)
+from pin_match import MatchResult, create_matcher, list_matchers, register_matcher
 from pin_match.contract import registry
 from pin_match.contract.matcher import ConfigError, MatcherError
 from pin_match.contract.registry import UnknownMatcherError, parse_overrides
 from pin_match.contract.scan import RegistrationError, scan_package
 
 
-@dataclass
-class BrightConfig(MatcherConfig):
-    gain: float = 1.0
-    channels: tuple[int, ...] = (0, 1, 2)
-    verbose: bool = False
-
-
-@register_matcher("test-bright")
-class BrightMatcher(Matcher):
-    """Scores an image by its brightest pixel; the point is that pixel."""
-
-    Config = BrightConfig
-    modality = Modality.VISUAL
-    default_sigma = 100.0
-
-    def _prepare(self, target):
-        self.prepared_with = target
-
-    def _match_batch(self, images):
-        out = []
-        for im in images:
-            lum = im[..., list(self.cfg.channels)].astype(float).mean(-1) * self.cfg.gain
-            y, x = np.unravel_index(np.argmax(lum), lum.shape)
-            out.append(MatchResult(score=float(lum.max()), points=[[x, y]]))
-        return out
-
-
-def test_plugin_defined_in_a_test_file_plugs_in(tiny_frameset):
+def test_a_plug_in_from_outside_the_package_plugs_in(tiny_frameset):
     assert "test-bright" in list_matchers("test-*")
     m = create_matcher("test-bright", gain="2")
     assert m.cfg.gain == 2.0
@@ -287,9 +252,9 @@ def _entry_point(name: str, value: str) -> EntryPoint:
 def test_an_entry_point_cannot_take_a_name_another_class_holds(monkeypatch):
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     sift = registry.builtin_registrations()["sift"]
-    clash = _entry_point("sift", "test_registry:BrightMatcher")
+    clash = _entry_point("sift", "toys:BrightMatcher")
     monkeypatch.setattr(registry, "_entry_points", lambda: {"sift": clash})
-    expected = f"'sift' is already registered by {re.escape(sift.dotted)}; test_registry.BrightMatcher needs"
+    expected = f"'sift' is already registered by {re.escape(sift.dotted)}; toys.BrightMatcher needs"
     with pytest.raises(RegistrationError, match=expected):
         list_matchers()
     registry._REGISTRY.pop("sift", None)
@@ -297,7 +262,7 @@ def test_an_entry_point_cannot_take_a_name_another_class_holds(monkeypatch):
         create_matcher("sift")
     # the same class under its own name again, declared by its package, is no clash
     monkeypatch.setattr(registry, "_entry_points",
-                        lambda: {"test-bright": _entry_point("test-bright", "test_registry:BrightMatcher")})
+                        lambda: {"test-bright": _entry_point("test-bright", "toys:BrightMatcher")})
     assert create_matcher("test-bright").default_sigma == 100.0
 
 
@@ -310,7 +275,7 @@ def test_two_entry_points_cannot_declare_one_name(monkeypatch):
 
 
 def test_entry_point_matchers_are_found(monkeypatch):
-    ep = EntryPoint(name="third-party", value="test_registry:BrightMatcher", group=registry.ENTRY_POINT_GROUP)
+    ep = EntryPoint(name="third-party", value="toys:BrightMatcher", group=registry.ENTRY_POINT_GROUP)
     monkeypatch.setattr(registry, "_entry_points", lambda: {"third-party": ep})
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
     registry._REGISTRY.pop("third-party", None)
@@ -329,20 +294,6 @@ def test_register_rejects_non_matchers_and_clashes():
         register_matcher("test-bright")(Other)
 
 
-class _Broken(Matcher):
-    modality = Modality.VISUAL
-
-    def __init__(self, result):
-        super().__init__()
-        self.result = result
-
-    def _prepare(self, target):
-        pass
-
-    def _match_batch(self, images):
-        return [self.result for _ in images]
-
-
 @pytest.mark.parametrize("result, message", [
     (MatchResult(score=float("nan")), "non-finite score"),
     (MatchResult(score=float("inf")), "non-finite score"),
@@ -353,9 +304,9 @@ class _Broken(Matcher):
     ("not a result", "returned str"),
 ])
 def test_base_class_rejects_invalid_results_by_name(tiny_frameset, result, message):
-    m = _Broken(result)
+    m = HandSet(result)
     m.prepare(tiny_frameset.target("mug_a"))
-    with pytest.raises(MatcherError, match=f"matcher _Broken.*{message}|{message}"):
+    with pytest.raises(MatcherError, match=f"matcher hand-set.*{message}"):
         m.match(np.zeros((20, 30, 3), np.uint8))
 
 

@@ -9,40 +9,19 @@ from __future__ import annotations
 import errno
 import json
 import shutil
-from dataclasses import dataclass
 
 import cv2
 import numpy as np
 import pandas as pd
 import pytest
-import slow_plugin  # noqa: F401  (registers test-slow)
+import toys  # noqa: F401  (registers test-slow and test-nan-for)
 
 from conftest import make_view
-from pin_match import CropConfig, CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.cli import main
 from pin_match.data.frameset import FrameSet
 from pin_match.data.writer import FrameSetWriter
 from pin_match.scoring import RunOptions, score
 from pin_match.scoring.table import ScoreTable, ScoreTableError
-
-
-@dataclass
-class NaNConfig(CropConfig):
-    value: float = float("nan")
-
-
-@register_matcher("test-nan")
-class NaNMatcher(CropMatcher):
-    """Returns a non-finite score for the second episode's frames only."""
-
-    Config = NaNConfig
-    modality = Modality.VISUAL
-
-    def _prepare(self, target):
-        self.bad = target.object_id == "mug_c"
-
-    def _match_crops(self, crops):
-        return [MatchResult(score=self.cfg.value if self.bad else 1.0) for _ in crops]
 
 
 @pytest.fixture
@@ -112,9 +91,9 @@ def test_unknown_matcher_and_config_key_suggest_close_names(tiny_frameset, tmp_p
 
 def test_non_finite_scores_name_the_matcher_and_frames(tiny_frameset, tmp_path, capsys):
     for value in ("nan", "inf"):
-        rc, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "test-nan", "--cfg", f"value={value}",
-                       "--out", tmp_path / value, "--quiet")
-        assert rc == 2 and "matcher test-nan returned a non-finite score" in err
+        rc, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "test-nan-for", "--cfg", f"value={value}",
+                       "--cfg", "bad_target=mug_c", "--cfg", "delay=0", "--out", tmp_path / value, "--quiet")
+        assert rc == 2 and "matcher test-nan-for returned a non-finite score" in err
         assert "episode 'ep_val'" in err and "ep_val_0000" in err
         assert not list((tmp_path / value).rglob("ep_val.parquet"))  # nothing of the bad episode written
 

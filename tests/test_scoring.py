@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import slow_plugin  # noqa: F401  (registers test-slow)
+import toys  # noqa: F401  (registers test-slow)
 
 from pin_match.scoring import RunOptions, Shard, merge, score
 from pin_match.scoring.table import ScoreTable
@@ -22,7 +22,7 @@ TESTS = Path(__file__).parent
 
 
 def _cli(args: list[str], env_extra: dict | None = None) -> subprocess.Popen:
-    code = "import sys, slow_plugin; from pin_match.cli import main; sys.exit(main(sys.argv[1:]))"
+    code = "import sys, toys; from pin_match.cli import main; sys.exit(main(sys.argv[1:]))"
     env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(TESTS), os.environ.get("PYTHONPATH", "")]),
                **(env_extra or {}))
     return subprocess.Popen([sys.executable, "-c", code, *args], env=env, stdout=subprocess.PIPE,

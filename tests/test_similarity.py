@@ -1,36 +1,19 @@
-"""Intra/inter-category similarity with a stub matcher whose embeddings are set by hand."""
+"""Intra/inter-category similarity with a toy matcher whose embeddings are set by hand."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
+from toys import HandSet
 
-from pin_match.contract.matcher import Matcher
 from pin_match.evaluation.similarity import similarity, similarity_tables, write_similarity
 
 # val objects of the tiny frame-set; lengths differ on purpose (cosine must normalise)
 EMBEDDINGS = {"mug_c": [1.0, 0.0, 0.0], "mug_d": [3.0, 4.0, 0.0], "ball_b": [0.6, 0.0, 0.8]}
 
 
-class StubMatcher(Matcher):
-    name = "stub"
-
-    def __init__(self, by_view: dict[bytes, list[float]]) -> None:
-        super().__init__()
-        self.by_view = by_view
-
-    def _prepare(self, target) -> None:
-        pass
-
-    def _match_batch(self, images):
-        return []
-
-    def embed_reference(self, view: np.ndarray) -> np.ndarray:
-        return np.asarray(self.by_view[view.tobytes()])
-
-
 def test_similarity_by_hand(tiny_frameset, tmp_path):
-    stub = StubMatcher({tiny_frameset.target(o).views[0].tobytes(): e for o, e in EMBEDDINGS.items()})
+    stub = HandSet(embeddings={tiny_frameset.target(o).views[0].tobytes(): e for o, e in EMBEDDINGS.items()})
     table, matrix = similarity(tiny_frameset, stub, split="val")
     # unit vectors: c = (1,0,0), d = (.6,.8,0), b = (.6,0,.8); cos(c,d) = .6, cos(c,b) = .6, cos(d,b) = .36
     assert table.loc["mug", "intra"] == pytest.approx(0.6)
