@@ -1,18 +1,20 @@
-"""Patch-similarity matchers (PIN's DINO, DINOv2, CLIP visual and CLIP textual baselines).
+"""What every patch-similarity matcher shares (``dino``, ``dinov2``, ``clip``, ``clip-text``, the feature-map ones).
 
 Every observation patch is compared by cosine with a few target vectors (one prototype per
 reference view, or one text feature per description); its score is the max over targets,
 the crop's score the max over patches, and every patch centre comes back as a point with its
 own score so that ``points_at(sigma)`` gives the paper's "centres of the patches above sigma"
-for any sigma. The math lives in ``PatchSimilarityMatcher`` and a few functions, independent
-of the backbone, so a stub backbone with hand-set tokens checks it exactly.
+for any sigma. The math lives here, in ``PatchSimilarityMatcher`` and a few functions,
+independent of the backbone, so a stub backbone with hand-set tokens checks it exactly; the
+modules of the algorithms (``dino.py``, ``clip.py``, ``effnet.py`` ...) say which backbone
+and which target vectors.
 """
 
 from __future__ import annotations
 
 import functools
 from abc import abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -34,20 +36,10 @@ from pin_match.contract import (
     WeightsSpec,
     create_matcher,
     misfit,
-    register_matcher,
     weights_field,
 )
-from pin_match.matchers.backbones import (
-    OPEN_CLIP_FILES,
-    TIMM_FILES,
-    OpenClipBackbone,
-    PatchBackbone,
-    TextBackbone,
-    TimmBackbone,
-)
+from pin_match.matchers.backbones import PatchBackbone
 from pin_match.nn.prototypes import masked_mean, patch_scores
-
-# ------------------------------------------------------------------------------------------ math
 
 
 def alpha_to_grid(alpha: np.ndarray, grid: int) -> torch.Tensor:
@@ -78,21 +70,6 @@ def patch_centres(grid: int, width: int, height: int) -> np.ndarray:
     centres = np.stack([xx.ravel(), yy.ravel()], axis=1).astype(np.float32)
     centres.setflags(write=False)
     return centres
-
-
-def text_target(encode_text: Callable[[Sequence[str]], torch.Tensor], description: str,
-                templates: Sequence[Callable[[str], str] | str]) -> torch.Tensor:
-    """One description through the prompt templates: per-template features normalised, averaged, normalised.
-
-    This is CLIP's zero-shot recipe (and CoW's); normalising before averaging keeps one
-    template with a large feature norm from dominating.
-    """
-    prompts = [t(description) if callable(t) else t.format(description) for t in templates]
-    feats = F.normalize(encode_text(prompts).float(), dim=-1)
-    return F.normalize(feats.mean(0), dim=0)
-
-
-# ------------------------------------------------------------------------------------------ matchers
 
 
 @dataclass
@@ -194,106 +171,6 @@ class ReferencePrototypeMatcher(PatchSimilarityMatcher):
         feats = backbone.encode([v[..., :3] for v in target.views]).patches
         alpha = torch.stack([alpha_to_grid(v[..., 3], backbone.grid).reshape(-1) for v in target.views])
         return masked_mean(feats, alpha)
-
-
-# ------------------------------------------------------------------------------------------ timm: DINO, DINOv2
-
-
-@dataclass
-class DinoConfig(PatchConfig):
-    model_name: str = "vit_base_patch16_224.dino"
-    img_size: int = 224
-
-
-@dataclass
-class Dinov2Config(PatchConfig):
-    model_name: str = "vit_base_patch14_dinov2.lvd142m"
-    img_size: int = 518
-
-
-class TimmPrototypeMatcher(ReferencePrototypeMatcher):
-    def _build_backbone(self) -> PatchBackbone:
-        cfg = self.cfg
-        return TimmBackbone(cfg.model_name, self.checkpoint(TIMM_FILES), cfg.img_size, cfg.device)
-
-
-@register_matcher("dino")
-class DinoMatcher(TimmPrototypeMatcher):
-    """DINO ViT-B/16 (ImageNet-1k, self-supervised) at 224: 14 x 14 patches."""
-
-    Config = DinoConfig
-    weights_spec = WeightsSpec("timm/vit_base_patch16_224.dino", filename="model.safetensors", license="apache-2.0")
-    default_sigma = 0.575
-    paper = "Caron et al., Emerging Properties in Self-Supervised Vision Transformers, ICCV 2021"
-
-
-@register_matcher("dinov2")
-class Dinov2Matcher(TimmPrototypeMatcher):
-    """DINOv2 ViT-B/14 (LVD-142M) at 518: 37 x 37 patches."""
-
-    Config = Dinov2Config
-    weights_spec = WeightsSpec("timm/vit_base_patch14_dinov2.lvd142m", filename="model.safetensors",
-                               license="apache-2.0")
-    default_sigma = 0.5
-    paper = "Oquab et al., DINOv2: Learning Robust Visual Features without Supervision, TMLR 2024"
-
-
-# ------------------------------------------------------------------------------------------ open_clip: CLIP
-
-
-@dataclass
-class ClipConfig(PatchConfig):
-    model_name: str = "ViT-B-16"
-    img_size: int = 224
-    quick_gelu: bool = True  # OpenAI's weights were trained with QuickGELU
-
-
-# the file open_clip itself fetches first for this repository (its .bin twin holds the same tensors)
-CLIP_WEIGHTS = WeightsSpec("timm/vit_base_patch16_clip_224.openai", filename="open_clip_model.safetensors",
-                           license="MIT")
-CLIP_PAPER = "Radford et al., Learning Transferable Visual Models From Natural Language Supervision, ICML 2021"
-
-
-def _open_clip_backbone(matcher: PatchSimilarityMatcher) -> OpenClipBackbone:
-    cfg = matcher.cfg
-    return OpenClipBackbone(cfg.model_name, matcher.checkpoint(OPEN_CLIP_FILES), cfg.img_size,
-                            cfg.quick_gelu, cfg.device)
-
-
-@register_matcher("clip")
-class ClipMatcher(ReferencePrototypeMatcher):
-    """CLIP ViT-B/16 (OpenAI) at 224, reference prototypes and patches in the joint space."""
-
-    Config = ClipConfig
-    weights_spec = CLIP_WEIGHTS
-    default_sigma = 0.575
-    paper = CLIP_PAPER
-
-    def _build_backbone(self) -> PatchBackbone:
-        return _open_clip_backbone(self)
-
-
-@register_matcher("clip-text")
-class ClipTextMatcher(PatchSimilarityMatcher):
-    """CLIP ViT-B/16 (OpenAI): patches against each description put through CLIP's 80 ImageNet templates."""
-
-    Config = ClipConfig
-    weights_spec = CLIP_WEIGHTS
-    modality = Modality.TEXTUAL
-    default_sigma = 0.28
-    paper = CLIP_PAPER
-
-    def _build_backbone(self) -> PatchBackbone:
-        return _open_clip_backbone(self)
-
-    def _target_vectors(self, target: Target) -> torch.Tensor:
-        from open_clip.zero_shot_metadata import OPENAI_IMAGENET_TEMPLATES
-
-        backbone = self.backbone
-        if not hasattr(backbone, "encode_text"):
-            raise MatcherError(f"matcher {self.display_name}: backbone {type(backbone).__name__} has no text encoder")
-        text: TextBackbone = backbone
-        return torch.stack([text_target(text.encode_text, d, OPENAI_IMAGENET_TEMPLATES) for d in target.descriptions])
 
 
 def patch_matcher(name: str, **overrides) -> PatchSimilarityMatcher:
