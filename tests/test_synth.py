@@ -6,9 +6,10 @@ import hashlib
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 import pytest
 
-from pin_match.data.synth import CATEGORIES, generate
+from pin_match.data.synth import CATEGORIES, DEFAULTS, generate
 from pin_match.data.synth.objects import make_objects
 
 SMALL = dict(seed=3, episodes=4, objects_per_category=4, frames_per_episode=8)
@@ -51,6 +52,18 @@ def test_splits_disjoint_and_complete(synth):
     split_of = dict(zip(objects.object_id, objects.split))
     for _, ep in synth.episodes.iterrows():
         assert {split_of[o] for o in [ep.target_object_id, *ep.distractor_object_ids]} == {ep.split}
+
+
+def test_siblings_share_their_shape_and_differ_in_one_thing():
+    specs = [s for s in make_objects(0, 10) if s.split == "val"]
+    for category in CATEGORIES:
+        family = [s for s in specs if s.category == category]
+        base = family[0].look
+        assert len({s.geometry_seed for s in family}) == 1 and len({s.look.variant for s in family}) == 1
+        changed = [[f for f in ("colour", "colour2", "word", "photo") if getattr(s.look, f) != getattr(base, f)]
+                   for s in family[1:]]
+        assert all(len(c) == 1 for c in changed), (category, changed)
+        assert {c[0] for c in changed} >= {"colour", "colour2"}, category
 
 
 def test_default_split_matches_pinned_ratio():
@@ -101,9 +114,49 @@ def test_visibility_agrees_with_masks(synth):
 
 def test_frames_shape_and_roles(synth):
     assert set(zip(synth.frames.height, synth.frames.width)) == {(640, 360)}
-    assert len(synth.frames) == SMALL["episodes"] * SMALL["frames_per_episode"]
+    per_episode = synth.frames.groupby("episode_id").size()
+    assert len(per_episode) == SMALL["episodes"]
+    assert (per_episode >= SMALL["frames_per_episode"]).all()  # the approach runs to its end: longer, never shorter
     roles = set(synth.visibility.role)
     assert "target" in roles and "other" in roles
+
+
+def _pixels(fs, role: str) -> pd.DataFrame:
+    """Per frame (with its episode and step) the pixels of the largest object of ``role``."""
+    vis = fs.visibility[fs.visibility.role == role].groupby("frame_id").pixels.max()
+    frames = fs.frames[["frame_id", "episode_id", "step"]].set_index("frame_id")
+    return frames.join(vis, how="left").fillna({"pixels": 0})
+
+
+def test_every_episode_ends_beside_its_target_facing_it(synth):
+    vis = synth.visibility
+    for episode_id, frames in synth.frames.groupby("episode_id"):
+        last = frames.sort_values("step").frame_id.iloc[-1]
+        row = vis[(vis.frame_id == last) & (vis.role == "target")]
+        assert len(row) == 1, f"{episode_id}: the last frame does not show the target"
+        row = row.iloc[0]
+        assert row.depth < 1.5, f"{episode_id}: the walk stops {row.depth:.2f} m from the target"  # 1.31 m high
+        centre = (row.x0 + row.x1) / 2
+        assert 0.25 * 360 < centre < 0.75 * 360, f"{episode_id}: the target is off to the side ({centre} px)"
+
+
+def test_every_episode_shows_its_target_large_and_passes_a_lookalike(synth):
+    target, same = _pixels(synth, "target"), _pixels(synth, "same_category")
+    for episode_id, frames in target.groupby("episode_id"):
+        assert (frames.pixels >= 2000).sum() >= 3, (episode_id, sorted(frames.pixels)[-5:])
+        assert same[same.episode_id == episode_id].pixels.max() >= 1000, episode_id  # met on the way, near
+
+
+@pytest.mark.slow
+def test_default_set_targets_large_and_alike_in_both_splits(tmp_path):
+    """The default set: every episode shows its target at 2,000 px in 3 frames; the splits' medians within 2x."""
+    from pin_match.evaluation.frameset_page import LARGE_PX, target_sizes
+    from pin_match.evaluation.labels import frame_labels
+
+    sizes = target_sizes(frame_labels(generate(tmp_path / "fs", workers=2, **DEFAULTS)))
+    assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}
+    assert (sizes["episodes with 3 such frames"] == sizes.episodes).all(), sizes.to_dict()
+    assert sizes.p50.max() / sizes.p50.min() <= 2.0, sizes.p50.to_dict()
 
 
 def test_episodes_have_same_category_distractors(synth):
@@ -149,3 +202,29 @@ def test_seed_whose_surfaces_overflow_still_builds(tmp_path):
     """Seed 11 at this size used to stop with 'no free surface for an object of radius ...'."""
     fs = generate(tmp_path / "fs", seed=11, episodes=24, objects_per_category=2, frames_per_episode=1, workers=1)
     assert len(fs.episodes) == 24 and len(fs.frames) == 24
+
+
+# ---------------------------------------------------------------- the approach walk, without rendering
+@pytest.mark.parametrize("seed", range(6))
+def test_walk_stops_within_a_metre_facing_the_target(seed):
+    from pin_match.data.synth.scene import make_room, place_objects
+    from pin_match.data.synth.walk import CAMERA_HEIGHT, MAX_STOP, MIN_STAND, Goal, camera_walk
+
+    room = make_room(np.random.default_rng(seed))
+    rng = np.random.default_rng(seed + 100)
+    (tx_, ty, tz, _), (lx, ly, lz, _) = place_objects(room, [(0.05, 0.1), (0.05, 0.1)], rng)
+    target, lookalike = Goal(tx_, ty, tz + 0.05, 0.006), Goal(lx, ly, lz + 0.05, 0.006)
+    poses = camera_walk(room, list(room.footprints), target, [lookalike], 20, rng)
+    assert len(poses) >= 20
+    x, y, yaw, pitch = poses[-1]
+    assert MIN_STAND - 0.1 <= np.hypot(x - tx_, y - ty) <= MAX_STOP + 0.1  # on the floor, as PIN's success
+    assert abs(np.angle(np.exp(1j * (np.arctan2(ty - y, tx_ - x) - yaw)))) < np.radians(5)  # facing it
+    assert pitch == pytest.approx(np.arctan2(target.z - CAMERA_HEIGHT, np.hypot(tx_ - x, ty - y)))
+    passes = [np.hypot(px - lx, py - ly) for px, py, _, _ in poses]
+    assert min(passes) < 1.5  # the walk went near the look-alike
+
+
+def test_prints_of_val_objects_never_print_on_train_objects():
+    specs = make_objects(0, 10)
+    photos = {split: {s.look.photo for s in specs if s.split == split and s.look.photo} for split in ("train", "val")}
+    assert photos["train"] and photos["val"] and not photos["train"] & photos["val"]

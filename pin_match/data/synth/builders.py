@@ -12,6 +12,7 @@ from collections.abc import Callable
 import cv2
 import numpy as np
 
+from pin_match.data.synth import prints
 from pin_match.data.synth import textures as tx
 from pin_match.data.synth.objects import CATEGORY_SPECS, ObjectSpec
 from pin_match.data.synth.parts import FRONT, UP, Parts, flat_ring
@@ -82,8 +83,8 @@ def ball(p: Parts) -> None:
     img = tx.pattern(lk.pattern if lk.pattern != "plain" else "plain", p.c1, p.c2, p.rng, scale=0.6)
     if lk.variant == "tennis ball":
         cv2.ellipse(img, (128, 128), (90, 40), 0, 0, 360, (240, 240, 240), 6, cv2.LINE_AA)
-    if lk.decal:
-        tx.decal(img, lk.decal, tx.rgb(lk.decal_colour), (0.75, 0.45), 0.18)
+    if lk.photo:
+        tx.photo(img, prints.image(lk.photo), (0.75, 0.45), 0.3)
     if lk.word:
         tx.text(img, lk.word, tx.contrasting(p.c1), (0.25, 0.5), 0.22)
     p.add(ellipsoid(r, r, r, 28), p.tile(img))
@@ -94,8 +95,8 @@ def book(p: Parts) -> None:
                "notebook": (0.15, 0.21, 0.015)}[p.look.variant]
     w, d, t = p.j(w), p.j(d), p.j(t)
     img = tx.pattern(p.look.pattern, p.c1, tx.shade(p.c1, 0.7), p.rng)
-    if p.look.decal:
-        tx.decal(img, p.look.decal, tx.rgb(p.look.decal_colour), (0.5, 0.58), 0.4)
+    if p.look.photo:
+        tx.photo(img, prints.image(p.look.photo), (0.5, 0.6), 0.55)
     title = p.look.word or "".join(p.rng.choice(list("ABCDEFGHIJKLMNOPRSTUVW"), 5))
     tx.text(img, title, tx.contrasting(p.c1), (0.5, 0.22), 0.7)
     cover, plain = p.tile(img), p.solid(p.c1)
@@ -266,8 +267,8 @@ def teddy_bear(p: Parts) -> None:
     s = p.j({"teddy bear": 1.0, "small teddy bear": 0.7, "big teddy bear": 1.4}[p.look.variant])
     fur = p.tile(tx.fabric(p.rng, p.c1))
     belly = tx.fabric(p.rng, tx.shade(p.c1, 1.25) + 20)
-    if p.look.decal:
-        tx.decal(belly, p.look.decal, tx.rgb(p.look.decal_colour), (0.75, 0.5), 0.3)
+    if p.look.photo:
+        tx.photo(belly, prints.image(p.look.photo), (0.75, 0.5), 0.3)
     light = p.tile(belly)
     dark = p.solid(tx.rgb("black"), grain=2)
     bow = p.solid(p.c2)
@@ -344,8 +345,8 @@ def wallet(p: Parts) -> None:
     cv2.rectangle(leather, (14, 14), (242, 242), tuple(int(c) for c in p.c2), 2, cv2.LINE_4)
     if v == "zip wallet":
         cv2.line(leather, (10, 40), (246, 40), (200, 200, 205), 5)
-    if p.look.decal:
-        tx.decal(leather, p.look.decal, tx.rgb(p.look.decal_colour), (0.78, 0.75), 0.16)
+    if p.look.photo:
+        tx.photo(leather, prints.image(p.look.photo), (0.5, 0.5), 0.6)
     if p.look.word:
         tx.text(leather, p.look.word, tx.rgb("gold"), (0.5, 0.5), 0.5)
     p.boxed(box(w, d, t).moved((0, 0, t / 2)), p.tile(leather), p.tile(tx.fabric(p.rng, p.c1)), facing=UP)
@@ -383,8 +384,15 @@ BUILDERS: dict[str, Callable[[Parts], None]] = {
 }
 
 
+# The smallest objects are drawn larger than life: at real size a key ring or a watch seen by a camera
+# 1.31 m high, standing at the table, covers 1,000-1,500 pixels of a 640 x 360 frame, too few for any
+# matcher's features; scaled up to this side area they cover 2,000 or more, as a phone does.
+MIN_SIDE_AREA = 0.01  # m^2
+
+
 def build(spec: ObjectSpec) -> tuple[Mesh, np.ndarray]:
     """The instance's mesh (resting on z = 0, centred in x and y) and its RGB texture atlas."""
     parts = Parts(spec.look, np.random.default_rng(spec.geometry_seed), CATEGORY_SPECS[spec.category].spread)
     BUILDERS[spec.category](parts)
-    return parts.assemble()
+    mesh, atlas = parts.assemble()
+    return mesh.scaled(max(1.0, float(np.sqrt(MIN_SIDE_AREA / mesh.side_area())))), atlas

@@ -21,12 +21,13 @@ from pin_match.data.synth.builders import build
 from pin_match.data.synth.objects import CATEGORIES, ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
 from pin_match.data.synth.scene import make_room, place_objects
-from pin_match.data.synth.walk import CAMERA_HEIGHT, camera_walk
+from pin_match.data.synth.shapes import Mesh
+from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk
 from pin_match.data.writer import FrameRecord, FrameSetWriter, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-DEFAULTS = dict(seed=0, episodes=24, objects_per_category=10, frames_per_episode=32)
-GENERATOR_VERSION = 1
+DEFAULTS = dict(seed=0, episodes=24, objects_per_category=10, frames_per_episode=48)
+GENERATOR_VERSION = 2
 
 
 @dataclass(frozen=True)
@@ -110,6 +111,19 @@ def _camera_look(image: np.ndarray, gain: float, rng: np.random.Generator) -> np
     return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
+def _camera(pose: Pose) -> Camera:
+    """The camera of a walk pose (x, y, yaw, pitch) at PIN's camera height."""
+    x, y, yaw, pitch = pose
+    ahead = (np.cos(yaw) * np.cos(pitch), np.sin(yaw) * np.cos(pitch), np.sin(pitch))
+    return Camera((x, y, CAMERA_HEIGHT), (x + ahead[0], y + ahead[1], CAMERA_HEIGHT + ahead[2]))
+
+
+def _look(mesh: Mesh, at: tuple[float, float, float]) -> Goal:
+    """An object as the walk sees it: its centre and its side-on area."""
+    height = float(mesh.bounds[1][2] - mesh.bounds[0][2])
+    return Goal(at[0], at[1], at[2] + height / 2, mesh.side_area())
+
+
 def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
     r = _renderer()
     r.reset()
@@ -125,7 +139,8 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
     spots = place_objects(room, sizes, rng)
     lut = np.zeros(1, np.uint16)
     legend = {}
-    looks = []
+    looks: dict[str, list[Goal]] = {"target": [], "same_category": []}
+    bodies: dict[Goal, int] = {}
     obstacles = list(room.footprints)
     for k, ((mesh, atlas), (x, y, z, yaw), spec, role) in enumerate(zip(built, spots, plan.objects, plan.roles)):
         body = r.add(mesh, atlas, (x, y, z), yaw)
@@ -133,8 +148,9 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
             lut = np.concatenate([lut, np.zeros(body + 2 - len(lut), np.uint16)])
         lut[body + 1] = k + 1
         legend[k + 1] = (spec.object_id, role)
-        if role in ("target", "same_category"):
-            looks.append((x, y, z + sizes[k][1] / 2))
+        if role in looks:
+            looks[role].append(_look(mesh, (x, y, z)))
+            bodies[looks[role][-1]] = body
         if z < 0.05:  # on the floor or a rug: the camera walks around it
             rad = sizes[k][0]
             obstacles.append((x - rad, y - rad, x + rad, y + rad))
@@ -142,10 +158,15 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
     gain = float(rng.uniform(0.9, 1.1))
     vfov = vertical_fov(HFOV, FRAME_WIDTH, FRAME_HEIGHT)
     records = []
-    for step, (x, y, yaw) in enumerate(camera_walk(room, obstacles, looks, plan.frames, rng)):
-        eye = (x, y, CAMERA_HEIGHT)
-        cam = Camera(eye, (x + np.cos(yaw), y + np.sin(yaw), CAMERA_HEIGHT))
-        rgb, ids, depth = r.render(cam, FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
+
+    def sight(look: Goal, pose: Pose) -> float:
+        """Pixels of the object seen from ``pose``, from a render at a quarter of the frame's size."""
+        ids = r.render(_camera(pose), FRAME_WIDTH // 4, FRAME_HEIGHT // 4, vfov, light)[1]
+        return 16.0 * float((ids == bodies[look]).sum())
+
+    walk = camera_walk(room, obstacles, looks["target"][0], looks["same_category"], plan.frames, rng, sight)
+    for step, pose in enumerate(walk):
+        rgb, ids, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
         mask = lut[np.clip(ids + 1, 0, len(lut) - 1)]
         image = _camera_look(rgb, gain, np.random.default_rng(stable_seed(plan.seed, "noise", step)))
         records.append(encode_frame(plan.staging, plan.episode_id, step, image, mask, legend, depth))

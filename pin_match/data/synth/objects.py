@@ -8,12 +8,13 @@ share the same attribute key, so their descriptions always tell them apart.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from pin_match.data.compose import stable_seed
-from pin_match.data.synth.textures import DECALS, WORDS
+from pin_match.data.synth import prints
+from pin_match.data.synth.textures import WORDS
 from pin_match.errors import PinMatchError
 
 
@@ -33,9 +34,9 @@ METAL = ("silver", "dark grey", "black", "gold", "rose gold", "white")
 class Category:
     """How much instances of a category vary, and which words describe them.
 
-    ``spread`` (0..1) scales proportion jitter and the share of instances carrying decals,
-    patterns or printed words: PIN's eyeglasses are near-identical (DINOv2 intra-category
-    similarity 0.85), its toys have little in common (0.14).
+    ``spread`` (0..1) scales proportion jitter, size and the share of families carrying a
+    pattern: PIN's eyeglasses are near-identical (DINOv2 intra-category similarity 0.85), its
+    toys have little in common (0.14).
     """
 
     name: str
@@ -45,7 +46,7 @@ class Category:
     trim: str  # how colour2 is said: "with {c2} straps"
     patterns: tuple[str, ...] = ("plain",)
     spread: float = 0.5
-    decals: bool = True  # whether the shape has a place where a logo is printed
+    prints: bool = True  # whether the shape has a place where a photo is printed
     words: bool = True
 
 
@@ -101,13 +102,13 @@ class Look:
     colour: str
     colour2: str
     pattern: str = "plain"
-    decal: str | None = None
-    decal_colour: str | None = None
     word: str | None = None
     scale: float = 1.0
+    photo: str | None = None  # a print id (``prints.py``): a real photo printed on the front
 
     def key(self) -> tuple:
-        return (self.variant, self.colour, self.colour2, self.pattern, self.decal, self.word)
+        return (self.variant, self.colour, self.colour2, self.pattern, self.word,
+                prints.subject(self.photo) if self.photo else None)
 
 
 @dataclass(frozen=True)
@@ -120,32 +121,61 @@ class ObjectSpec:
     descriptions: tuple[str, ...] = field(default=())
 
 
-def sample_look(cat: Category, rng: np.random.Generator, taken: set[tuple]) -> Look:
-    """Draw a look whose attribute key no sibling has (so descriptions always differ)."""
-    for _ in range(500):
-        colour = str(rng.choice(cat.colours))
-        colour2 = str(rng.choice([c for c in cat.colours2 if c != colour] or cat.colours2))
-        pattern = str(rng.choice(cat.patterns)) if rng.random() < 0.3 + 0.5 * cat.spread else cat.patterns[0]
-        decal = decal_colour = word = None
-        if cat.decals and rng.random() < 0.2 + 0.5 * cat.spread:
-            decal = str(rng.choice(DECALS))
-            decal_colour = str(rng.choice([c for c in ("red", "yellow", "white", "black", "blue", "orange", "green",
-                                                       "pink") if c not in (colour, colour2)]))
-        if cat.words and rng.random() < 0.1 + 0.4 * cat.spread:
-            word = str(rng.choice(WORDS))
-        look = Look(str(rng.choice(cat.variants)), colour, colour2, pattern, decal, decal_colour, word,
-                    float(np.exp(rng.normal(0, 0.04 + 0.12 * cat.spread))))
+def sample_look(cat: Category, rng: np.random.Generator, photos: tuple[str, ...]) -> Look:
+    """A family's first member: kind, colours, pattern, and a photo print (or a word where no print fits)."""
+    colour = str(rng.choice(cat.colours))
+    colour2 = str(rng.choice([c for c in cat.colours2 if c != colour] or cat.colours2))
+    pattern = str(rng.choice(cat.patterns)) if rng.random() < 0.3 + 0.5 * cat.spread else cat.patterns[0]
+    photo = str(rng.choice(photos)) if cat.prints and photos else None
+    word = str(rng.choice(WORDS)) if cat.words and photo is None else None
+    return Look(str(rng.choice(cat.variants)), colour, colour2, pattern, word,
+                float(np.exp(rng.normal(0, 0.04 + 0.12 * cat.spread))), photo)
+
+
+def differences(cat: Category) -> tuple[str, ...]:
+    """The ways siblings of one family differ, as real instances of a product do: the print, the colour, a part."""
+    printed = ("print",) if cat.prints or cat.words else ()
+    return (*printed, "colour", "part")
+
+
+def vary(cat: Category, base: Look, kind: str, rng: np.random.Generator, taken: set[tuple],
+         photos: tuple[str, ...]) -> Look:
+    """A sibling of ``base`` that differs in one thing (``kind``): its print, its main colour, or a part's colour.
+
+    Shape, proportions and everything else stay the family's, so siblings share their shape
+    (the same ``geometry_seed`` draws the same proportions).
+    """
+    for _ in range(200):
+        if kind == "print" and base.photo is not None:
+            look = replace(base, photo=str(rng.choice(photos)))
+        elif kind == "print":
+            look = replace(base, word=str(rng.choice(WORDS)))
+        elif kind == "colour":
+            look = replace(base, colour=str(rng.choice([c for c in cat.colours if c != base.colour2])))
+        else:
+            look = replace(base, colour2=str(rng.choice([c for c in cat.colours2 if c != base.colour])))
         if look.key() not in taken:
             taken.add(look.key())
             return look
     raise ValueError(f"category {cat.name!r}: cannot draw another distinct instance; too many objects per category")
 
 
+def family(cat: Category, count: int, rng: np.random.Generator, photos: tuple[str, ...]) -> list[Look]:
+    """``count`` instances of one shape: the first as drawn, each other differing from it in one way, in turn."""
+    base = sample_look(cat, rng, photos)
+    taken = {base.key()}
+    kinds = differences(cat)
+    return [base, *(vary(cat, base, kinds[k % len(kinds)], rng, taken, photos) for k in range(count - 1))]
+
+
 def make_objects(seed: int, per_category: int, val_fraction: float = 0.4) -> list[ObjectSpec]:
     """All instances, train first then val within each category, ids like ``mug_007``.
 
-    Every category gets at least one val and one train instance (two of each from 4 per
-    category on), so that episodes of both splits can hold same-category distractors.
+    Each split of a category is one family (``family``): same kind and shape, each sibling
+    differing from the first in its print, colour or a part, so an episode's same-category
+    look-alikes are what real look-alikes are, the same product in another version. Every
+    category gets at least one val and one train instance (two of each from 4 per category
+    on), so that episodes of both splits can hold same-category distractors.
     """
     if per_category < 2:
         raise SynthError(f"objects_per_category must be at least 2 (one train, one val), got {per_category}")
@@ -153,33 +183,31 @@ def make_objects(seed: int, per_category: int, val_fraction: float = 0.4) -> lis
     specs = []
     for name in CATEGORIES:
         cat = CATEGORY_SPECS[name]
-        rng = np.random.default_rng(stable_seed(seed, "category", name))
-        taken: set[tuple] = set()
-        looks = [sample_look(cat, rng, taken) for _ in range(per_category)]
-        for k, look in enumerate(looks):
+        looks: list[tuple[str, Look]] = []
+        for split, count in (("train", per_category - n_val), ("val", n_val)):
+            rng = np.random.default_rng(stable_seed(seed, "category", name, split))
+            photos = tuple(p.print_id for p in prints.for_split(split))
+            looks += [(split, look) for look in family(cat, count, rng, photos)]
+        shape_seed = {split: stable_seed(seed, "geometry", name, split) for split in ("train", "val")}
+        for k, (split, look) in enumerate(looks):
             object_id = f"{name.replace(' ', '_')}_{k:03d}"
-            split = "train" if k < per_category - n_val else "val"
-            siblings = [other for other in looks if other is not look]
+            siblings = [other for s, other in looks if other is not look and s == split]
             rng_text = np.random.default_rng(stable_seed(seed, "describe", object_id))
-            descriptions = describe(cat, look, siblings, rng_text)
-            specs.append(ObjectSpec(object_id, name, split, look, stable_seed(seed, "geometry", object_id),
-                                    descriptions))
+            specs.append(ObjectSpec(object_id, name, split, look, shape_seed[split],
+                                    describe(cat, look, siblings, rng_text)))
     return specs
 
 
 # ------------------------------------------------------------------ descriptions
-_DECAL_WORDS = ("logo", "print", "picture", "symbol")
-
-
 def _facts(look: Look) -> dict[str, str]:
     """The attributes beyond colour and kind that a description may mention."""
     facts = {"trim": look.colour2}
     if look.pattern != "plain":
         facts["pattern"] = f"{look.colour2} {look.pattern}"
-    if look.decal:
-        facts["decal"] = f"{look.decal_colour} {look.decal}"
     if look.word:
         facts["word"] = look.word
+    if look.photo:
+        facts["photo"] = prints.subject(look.photo)
     return facts
 
 
@@ -211,12 +239,11 @@ def _phrase(cat: Category, look: Look, fact: str, rng: np.random.Generator) -> s
     if fact == "pattern":
         return str(rng.choice([f"with a {look.colour2} {look.pattern} pattern", f"with {look.colour2} {look.pattern} "
                                "decoration", f"covered in a {look.pattern} {look.colour2} pattern"]))
-    if fact == "decal":
-        noun = rng.choice(_DECAL_WORDS)
-        a = _article(look.decal_colour or "")
-        return str(rng.choice([f"with {a} {look.decal_colour} {look.decal} {noun} on it",
-                               f"with {a} {look.decal_colour} {look.decal} {noun}",
-                               f"with {a} {look.decal_colour} {look.decal} printed on the front"]))
+    if fact == "photo":
+        subject = prints.subject(look.photo or "")
+        a = "" if subject.endswith("s") else _article(subject) + " "
+        return str(rng.choice([f"with a photo of {a}{subject} printed on it", f"with a printed picture of {a}{subject}",
+                               f"with {a}{subject} photo print on the front"]))
     return str(rng.choice([f'with the word "{look.word}" written on it', f'with "{look.word}" printed on it',
                            f'with "{look.word}" on it']))
 

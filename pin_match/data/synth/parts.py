@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from pin_match.data.synth import prints
 from pin_match.data.synth import textures as tx
 from pin_match.data.synth.objects import Look
 from pin_match.data.synth.shapes import Mesh, lathe, merge, split_facing
@@ -41,20 +42,18 @@ class Parts:
         return self.tile(tx.solid(colour, self.rng, grain))
 
     def body(self, front_u: float | None = 0.5, front_v: float = 0.45, logo: bool = True) -> int:
-        """The main material: colour, pattern, and (when ``logo``) the decal and printed word at the front."""
+        """The main material: colour, pattern, and (when ``logo``) the photo print and printed word at the front."""
         lk = self.look
         if lk.colour == "tortoiseshell":
             img = tx.pattern("camouflage", self.c1, tx.rgb("tan"), self.rng, scale=2)
         else:
             img = tx.pattern(lk.pattern, self.c1, self.c2, self.rng)
         if logo and front_u is not None:
-            if lk.decal:
-                tx.decal(img, lk.decal, tx.rgb(lk.decal_colour), (front_u, front_v - (0.12 if lk.word else 0)),
-                         0.32 if lk.word else 0.42)
+            narrow = front_u in (0.25, 0.75)  # a quarter of a surface of revolution: the front
+            if lk.photo:
+                tx.photo(img, prints.image(lk.photo), (front_u, front_v), 0.3 if narrow else 0.6)
             if lk.word:
-                where = front_v + (0.2 if lk.decal else 0)
-                width = 0.28 if front_u in (0.25, 0.75) else 0.7
-                tx.text(img, lk.word, tx.contrasting(self.c1), (front_u, where), width,
+                tx.text(img, lk.word, tx.contrasting(self.c1), (front_u, front_v), 0.28 if narrow else 0.7,
                         label=None if lk.pattern == "plain" else self.c1)
         return self.tile(img)
 

@@ -245,7 +245,8 @@ def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.G
 
     Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
     nightstand, but every kind of surface gets used; shelves only take what fits under the
-    next board. An object that fits on no surface (a big one in a room of small furniture,
+    next board; the rug takes no small object (keys, a watch), which a camera 1.31 m high
+    would never see larger than a speck. An object that fits on no surface (a big one in a room of small furniture,
     or one that comes after the surfaces filled up) stands on the floor along a wall, clear
     of furniture, as large objects do in a real house; the room's middle stays free for
     the camera walk. Every draw comes from ``rng``, so the result is still a pure function
@@ -256,7 +257,7 @@ def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.G
     weights = np.array([np.sqrt(s.area) for s in room.surfaces])
     for radius, height in sizes:
         fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
-                         for s in room.surfaces])
+                         and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
         p = weights * fits
         placed = False
         for _ in range(200 if p.sum() else 0):
@@ -274,6 +275,7 @@ def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.G
     return out
 
 
+SMALL_ON_FLOOR = 0.12  # objects of a smaller radius go on furniture: seen from 1.31 m on the floor they stay specks
 FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
 
 

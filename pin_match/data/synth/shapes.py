@@ -49,6 +49,12 @@ class Mesh:
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         return self.vertices.min(0), self.vertices.max(0)
 
+    def side_area(self) -> float:
+        """About the area the object shows seen from the side and a little above (m^2): its box, 60 % filled."""
+        lo, hi = self.bounds
+        wide, narrow = sorted((hi[0] - lo[0], hi[1] - lo[1]), reverse=True)
+        return float(0.6 * wide * (hi[2] - lo[2] + 0.5 * narrow))
+
 
 def merge(meshes: list[Mesh]) -> Mesh:
     faces, start = [], 0
@@ -130,7 +136,7 @@ def box(sx: float, sy: float, sz: float, uv_metres: float | None = None) -> Mesh
 def lathe(radii, heights, segments: int = 24, caps: bool = True) -> Mesh:
     """A surface of revolution about z from a profile (radius, height) listed bottom to top.
 
-    U runs around the axis (the seam at angle 0 faces +x, so front decals at U=0.75 face -y),
+    U runs around the axis (the seam at angle 0 faces +x, so front prints at U=0.75 face -y),
     V runs along the profile; caps close the ends with flat discs.
     """
     r = np.asarray(radii, float)

@@ -1,4 +1,4 @@
-"""Procedural texture tiles: colours, patterns, printed decals and text, room materials.
+"""Procedural texture tiles: colours, patterns, photo prints and text, room materials.
 
 Everything here is drawn with numpy and OpenCV from an explicit random generator, so a
 texture is a pure function of its arguments and the generator's state.
@@ -25,8 +25,6 @@ COLOURS: dict[str, tuple[int, int, int]] = {
 }
 
 PATTERNS = ("plain", "striped", "checked", "polka-dot", "zigzag", "camouflage", "plaid", "floral")
-DECALS = ("star", "heart", "circle", "triangle", "lightning bolt", "crescent moon", "flower", "diamond", "cross",
-          "paw print", "anchor", "smiley face")
 WORDS = ("NOVA", "ZEN", "HELLO", "LOVE", "PARIS", "RIO", "SURF", "CAT", "GO!", "ACE", "MOM", "BOSS", "JOY", "KAI",
          "MAX", "OK", "SUN", "YES", "LUNA", "PIXEL", "ROCK", "COOL", "BEST", "DAD")
 
@@ -79,72 +77,18 @@ def pattern(kind: str, c1: np.ndarray, c2: np.ndarray, rng: np.random.Generator,
     return img
 
 
-def _star(n: int, r_out: float, r_in: float) -> np.ndarray:
-    a = np.pi / 2 + np.arange(2 * n) * np.pi / n
-    r = np.where(np.arange(2 * n) % 2 == 0, r_out, r_in)
-    return np.stack([r * np.cos(a), -r * np.sin(a)], 1)
-
-
-def decal(img: np.ndarray, kind: str, colour: np.ndarray, centre=(0.5, 0.5),  # noqa: C901 - a flat switch
-          scale: float = 0.35) -> np.ndarray:
-    """Print a logo-like shape onto a tile (in place, also returned)."""
+def photo(img: np.ndarray, rgba: np.ndarray, centre=(0.5, 0.5), scale: float = 0.45) -> np.ndarray:
+    """Print an RGBA photo onto a tile, its longer side ``scale`` of the tile's (in place, also returned)."""
     size = img.shape[0]
-    c = np.array(centre) * size
-    s = scale * size / 2
-    col = tuple(int(v) for v in colour)
-
-    def poly(points: np.ndarray) -> None:
-        cv2.fillPoly(img, [np.round(c + points * s).astype(np.int32)], col, cv2.LINE_AA)
-
-    def disc(dx: float, dy: float, r: float) -> None:
-        cv2.circle(img, (int(c[0] + dx * s), int(c[1] + dy * s)), max(1, int(r * s)), col, -1, cv2.LINE_AA)
-
-    if kind == "star":
-        poly(_star(5, 1.0, 0.42))
-    elif kind == "heart":
-        t = np.linspace(0, 2 * np.pi, 60)
-        poly(np.stack([16 * np.sin(t) ** 3, -(13 * np.cos(t) - 5 * np.cos(2 * t) - 2 * np.cos(3 * t) - np.cos(4 * t))],
-                      1) / 17)
-    elif kind == "circle":
-        disc(0, 0, 0.9)
-    elif kind == "triangle":
-        poly(np.array([[0, -0.95], [0.95, 0.75], [-0.95, 0.75]]))
-    elif kind == "lightning bolt":
-        poly(np.array([[0.2, -1], [-0.5, 0.1], [0.0, 0.1], [-0.25, 1], [0.55, -0.2], [0.05, -0.2], [0.35, -1]]))
-    elif kind == "crescent moon":
-        disc(0, 0, 0.9)
-        bg = tuple(int(v) for v in img[int(np.clip(c[1] - s * 0.95, 0, size - 1)), int(np.clip(c[0] - s * 0.95, 0,
-                                                                                                   size - 1))])
-        cv2.circle(img, (int(c[0] + 0.4 * s), int(c[1] - 0.2 * s)), int(0.75 * s), bg, -1, cv2.LINE_AA)
-    elif kind == "flower":
-        for k in range(6):
-            a = 2 * np.pi * k / 6
-            disc(0.55 * np.cos(a), 0.55 * np.sin(a), 0.38)
-        disc(0, 0, 0.3)
-    elif kind == "diamond":
-        poly(np.array([[0, -1], [0.65, 0], [0, 1], [-0.65, 0]]))
-    elif kind == "cross":
-        poly(np.array([[-0.3, -0.95], [0.3, -0.95], [0.3, -0.3], [0.95, -0.3], [0.95, 0.3], [0.3, 0.3], [0.3, 0.95],
-                       [-0.3, 0.95], [-0.3, 0.3], [-0.95, 0.3], [-0.95, -0.3], [-0.3, -0.3]]))
-    elif kind == "paw print":
-        disc(0, 0.35, 0.5)
-        for dx, dy in ((-0.62, -0.3), (-0.22, -0.68), (0.22, -0.68), (0.62, -0.3)):
-            disc(dx, dy, 0.2)
-    elif kind == "anchor":
-        cv2.line(img, tuple(np.int32(c + [0, -0.8 * s])), tuple(np.int32(c + [0, 0.8 * s])), col, max(2, int(s * .18)))
-        cv2.line(img, tuple(np.int32(c + [-0.45 * s, -0.4 * s])), tuple(np.int32(c + [0.45 * s, -0.4 * s])), col,
-                 max(2, int(s * .15)))
-        cv2.ellipse(img, tuple(np.int32(c + [0, 0.2 * s])), (int(0.75 * s), int(0.6 * s)), 0, 0, 180, col,
-                    max(2, int(s * .15)))
-    elif kind == "smiley face":
-        disc(0, 0, 0.95)
-        dark = tuple(int(v * 0.25) for v in colour)
-        for dx in (-0.35, 0.35):
-            cv2.circle(img, (int(c[0] + dx * s), int(c[1] - 0.25 * s)), max(1, int(0.12 * s)), dark, -1)
-        cv2.ellipse(img, tuple(np.int32(c + [0, 0.1 * s])), (int(0.5 * s), int(0.45 * s)), 0, 20, 160, dark,
-                    max(2, int(s * .1)))
-    else:
-        raise ValueError(f"unknown decal kind {kind!r}")
+    h, w = rgba.shape[:2]
+    k = scale * size / max(h, w)
+    pw, ph = max(1, int(round(w * k))), max(1, int(round(h * k)))
+    small = cv2.resize(rgba, (pw, ph), interpolation=cv2.INTER_AREA if k < 1 else cv2.INTER_CUBIC)
+    x0 = int(np.clip(round(centre[0] * size - pw / 2), 0, size - pw))
+    y0 = int(np.clip(round(centre[1] * size - ph / 2), 0, size - ph))
+    alpha = small[..., 3:].astype(np.float32) / 255.0
+    region = img[y0:y0 + ph, x0:x0 + pw].astype(np.float32)
+    img[y0:y0 + ph, x0:x0 + pw] = np.round(region * (1 - alpha) + small[..., :3] * alpha).astype(np.uint8)
     return img
 
 

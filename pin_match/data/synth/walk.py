@@ -1,15 +1,29 @@
-"""A robot-like camera walk: PIN's discrete actions (0.25 m forward, 30 degree turns) through free space.
+"""A PIN agent's camera walk: explore, pass a look-alike, then approach the target and stop beside it.
 
-The walk visits a shuffled list of goals: a look-around on the spot, random places in the
-room (most frames, which show nothing relevant, as in a real exploration), and viewpoints
-0.7-3.5 m from the target and from a same-category distractor, facing them. Paths come
-from a breadth-first search on a 10 cm occupancy grid, so the camera never passes through
-furniture or walls.
+PIN's episodes are a successful agent walking to its goal: the target is seen far, then
+near, and the episode ends within about 1 m of it, facing it; same-category look-alikes are
+met on the way. The walk does the same with PIN's discrete actions (0.25 m forward, turns of
+at most 30 degrees), along breadth-first paths on a 10 cm occupancy grid (never through
+furniture or walls):
+
+1. a look-around on the spot;
+2. exploration: random places, until the frames the approaches need are all that is left
+   of the episode (most of these frames show nothing relevant, as in a real exploration);
+3. a pass by a same-category look-alike: a straight approach to it, facing it;
+4. the approach: from 1-1.75 m further out, straight at the target, one frame per step,
+   to a stop distance at which the target fills a few thousand pixels (at most 1 m), then
+   the stop: the camera tilts down or up to centre the target (as an agent's look-down
+   action) and the episode ends there.
+
+The camera has no pitch except in the approaches (steps 3 and 4), where an object below
+the field of view is brought into it by tilting, as a robot's head would.
 """
 
 from __future__ import annotations
 
 from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -19,21 +33,49 @@ CAMERA_HEIGHT = 1.31
 STEP = 0.25
 TURN = np.radians(30)
 CELL = 0.1
-CLEARANCE = 0.3
-MAX_VIEW_DISTANCE = 3.5
+CLEARANCE = 0.3  # the camera body's radius while exploring
+NEAR_CLEARANCE = 0.1  # how close to furniture the camera may stand when it stops beside an object
+FOCAL_PX = 469.0  # the frame's focal length in pixels (360 px wide, HFOV 42 degrees)
+STOP_PIXELS = 6000.0  # the stop distance shows the object at about this many pixels ...
+MAX_STOP = 1.0  # ... but never further than this on the floor (PIN's success radius)
+MIN_STOP = 0.45  # the closest a stop may be (3D distance from the camera to the object's centre) ...
+MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal distance)
+SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
+HALF_VFOV = np.radians(34.3)  # half the vertical field of view of the 640 x 360 portrait frame
+TARGET_RUN = (1.0, 1.75)  # the straight run at the target starts this far (metres) behind the stop ...
+LOOKALIKE_RUN = (0.5, 1.0)  # ... and at a look-alike passed on the way
+APPROACH_FRAMES = 40  # about what the two approaches take, walking there included; exploration gets the rest
+
+
+@dataclass(frozen=True)
+class Goal:
+    """An object worth approaching: its centre (metres) and the area it shows seen from the side (m^2)."""
+
+    x: float
+    y: float
+    z: float
+    area: float
+
+    def stop_distance(self) -> float:
+        """How far from the object's centre an agent would stop to see it large (at most 1 m)."""
+        return float(np.clip(FOCAL_PX * np.sqrt(self.area / STOP_PIXELS), MIN_STOP, MAX_STOP))
+
+
+Pose = tuple[float, float, float, float]  # x, y, yaw, pitch (radians)
 
 
 class Grid:
-    """Free cells of the room for a camera body of radius ``CLEARANCE``."""
+    """Free cells of the room for a camera body of radius ``clearance``."""
 
-    def __init__(self, room: Room, obstacles: list[tuple[float, float, float, float]]) -> None:
+    def __init__(self, room: Room, obstacles: list[tuple[float, float, float, float]],
+                 clearance: float = CLEARANCE) -> None:
         self.nx, self.ny = int(room.width / CELL), int(room.depth / CELL)
         xs = (np.arange(self.nx) + 0.5) * CELL
         ys = (np.arange(self.ny) + 0.5) * CELL
         X, Y = np.meshgrid(xs, ys, indexing="ij")
-        free = (X > CLEARANCE) & (X < room.width - CLEARANCE) & (Y > CLEARANCE) & (Y < room.depth - CLEARANCE)
+        free = (X > clearance) & (X < room.width - clearance) & (Y > clearance) & (Y < room.depth - clearance)
         for x0, y0, x1, y1 in obstacles:
-            free &= ~((X > x0 - CLEARANCE) & (X < x1 + CLEARANCE) & (Y > y0 - CLEARANCE) & (Y < y1 + CLEARANCE))
+            free &= ~((X > x0 - clearance) & (X < x1 + clearance) & (Y > y0 - clearance) & (Y < y1 + clearance))
         self.free = free
 
     def centre(self, cell: tuple[int, int]) -> np.ndarray:
@@ -62,8 +104,13 @@ class Grid:
 
 
 def _path(grid: Grid, start: tuple[int, int], goal: tuple[int, int]) -> list[np.ndarray]:
-    """Waypoints from start to goal: the BFS path with corners cut where the straight line is free."""
+    """Waypoints from start to goal: the BFS path with corners cut where the straight line is free.
+
+    A goal the walker cannot reach from ``start`` gives no path (the walker stays).
+    """
     parent = grid.bfs(start)
+    if goal not in parent:
+        return [grid.centre(start)]
     cells = [goal]
     while parent[cells[-1]] is not None:
         cells.append(parent[cells[-1]])  # type: ignore[arg-type]
@@ -83,20 +130,30 @@ def _wrap(a: float) -> float:
     return float((a + np.pi) % (2 * np.pi) - np.pi)
 
 
-def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]],
-                looks: list[tuple[float, float, float]], n_frames: int,
-                rng: np.random.Generator) -> list[tuple[float, float, float]]:
-    """Camera poses (x, y, yaw) for ``n_frames`` frames; ``looks`` are points worth facing (target first)."""
+Sight = Callable[[Goal, Pose], float]  # how many pixels of the object a pose shows (a quick render)
+
+
+def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], target: Goal,
+                lookalikes: list[Goal], n_frames: int, rng: np.random.Generator, sight: Sight | None = None,
+                ) -> list[Pose]:
+    """Camera poses (x, y, yaw, pitch): explore, pass one look-alike, approach ``target`` and stop beside it.
+
+    About ``n_frames`` poses: exploration takes what the approaches leave of it (at least a
+    look-around), and the approaches always run to the end, so a short ``n_frames`` gives a
+    longer episode rather than one that never nears its target. ``sight`` lets the walk choose,
+    among stop spots at about the right distance, the one from which the object shows most (a
+    shelf's side panel or a sofa back hides what a floor plan cannot tell); without it the
+    spot nearest the stop distance is taken.
+    """
     grid = Grid(room, obstacles)
+    near = Grid(room, obstacles, NEAR_CLEARANCE)
     start, reachable = _start(grid, rng)
-    walk = _Walk(grid, reachable, looks, n_frames, rng, grid.centre(start), float(rng.uniform(-np.pi, np.pi)))
-    plan: list[tuple[str, int]] = [("look", 0), ("look", 0), ("random", 0), ("random", 0)]
-    plan += [("look", k) for k in range(1, min(3, len(looks)))]
-    order = [plan[k] for k in rng.permutation(len(plan))]
-    try:
-        walk.run(order)
-    except _WalkDone:
-        pass
+    walk = _Walk(grid, near, reachable, rng, grid.centre(start), float(rng.uniform(-np.pi, np.pi)), sight)
+    walk.look_around(int(rng.integers(3, 7)))
+    walk.explore(n_frames - APPROACH_FRAMES)
+    if lookalikes:
+        walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], LOOKALIKE_RUN, stop=False)
+    walk.approach(target, TARGET_RUN, stop=True)
     return walk.poses
 
 
@@ -114,45 +171,48 @@ def _start(grid: Grid, rng: np.random.Generator) -> tuple[tuple[int, int], np.nd
     return start, np.array(list(reach))
 
 
-class _WalkDone(Exception):
-    """Raised by ``_Walk.emit`` once the walk has all its frames, so every nested loop ends at once."""
+def _pitch_for(eye: np.ndarray, look: Goal, centre: bool) -> float:
+    """The camera's tilt: none while ``look`` is well inside the view, else just enough (or, to centre it, all)."""
+    elevation = float(np.arctan2(look.z - CAMERA_HEIGHT, np.hypot(look.x - eye[0], look.y - eye[1])))
+    if centre:
+        return elevation
+    margin = HALF_VFOV - np.radians(12)
+    return float(np.clip(0.0, elevation - margin, elevation + margin))
 
 
 class _Walk:
-    """An agent-like walk: look around, then visit viewpoints of the looks and random places, in a seeded order."""
+    """The agent's state (position, heading) and the poses it has emitted."""
 
-    def __init__(self, grid: Grid, reachable: np.ndarray, looks: list[tuple[float, float, float]], n_frames: int,
-                 rng: np.random.Generator, pos: np.ndarray, yaw: float) -> None:
-        self.grid, self.reachable, self.looks, self.n_frames, self.rng = grid, reachable, looks, n_frames, rng
-        self.pos, self.yaw = pos, yaw
-        self.poses: list[tuple[float, float, float]] = []
+    def __init__(self, grid: Grid, near: Grid, reachable: np.ndarray, rng: np.random.Generator, pos: np.ndarray,
+                 yaw: float, sight: Sight | None) -> None:
+        self.grid, self.near, self.reachable, self.rng, self.sight = grid, near, reachable, rng, sight
+        self.pos, self.yaw, self.pitch = pos, yaw, 0.0
+        self.poses: list[Pose] = []
+        self.emit()
 
     def emit(self) -> None:
-        self.poses.append((float(self.pos[0]), float(self.pos[1]), self.yaw))
-        if len(self.poses) >= self.n_frames:
-            raise _WalkDone
+        self.poses.append((float(self.pos[0]), float(self.pos[1]), self.yaw, self.pitch))
+
+    def look_around(self, turns: int) -> None:
+        for _ in range(turns):
+            self.yaw = _wrap(self.yaw + TURN)
+            self.emit()
 
     def turn_to(self, goal_yaw: float) -> None:
         while abs(_wrap(goal_yaw - self.yaw)) > np.radians(5):
             self.yaw = _wrap(self.yaw + float(np.clip(_wrap(goal_yaw - self.yaw), -TURN, TURN)))
             self.emit()
 
-    def viewpoint(self, look: tuple[float, float, float]) -> tuple[tuple[int, int], float]:
-        """A reachable cell that sees ``look`` from a natural distance, and the yaw facing it."""
-        x, y, z = look
-        near = max(0.7, (CAMERA_HEIGHT - z) / np.tan(np.radians(28)))
-        centres = (self.reachable + 0.5) * CELL
-        dist = np.hypot(centres[:, 0] - x, centres[:, 1] - y)
-        ok = np.flatnonzero((dist > near) & (dist < max(near + 0.5, MAX_VIEW_DISTANCE)))
-        c = self.reachable[ok[self.rng.integers(len(ok))]] if len(ok) else \
-            self.reachable[np.argmax(-abs(dist - near))]
-        cx, cy = (c + 0.5) * CELL
-        return (int(c[0]), int(c[1])), float(np.arctan2(y - cy, x - cx))
+    def go_to(self, goal: tuple[int, int], budget: int | None = None) -> None:
+        """Walk the grid path in steps, turning first wherever the heading is off by more than 20 degrees.
 
-    def go_to(self, goal: tuple[int, int]) -> None:
-        """Walk the grid path in steps, turning first wherever the heading is off by more than 20 degrees."""
+        With ``budget``, stop once the walk holds that many poses.
+        """
+        self.pitch = 0.0
         for waypoint in _path(self.grid, self.grid.cell(self.pos), goal)[1:]:
             while np.linalg.norm(waypoint - self.pos) > 0.05:
+                if budget is not None and len(self.poses) >= budget:
+                    return
                 heading = float(np.arctan2(*(waypoint - self.pos)[::-1]))
                 if abs(_wrap(heading - self.yaw)) > np.radians(20):
                     self.turn_to(heading)
@@ -160,20 +220,74 @@ class _Walk:
                 self.pos = self.pos + (waypoint - self.pos) * min(1.0, STEP / np.linalg.norm(waypoint - self.pos))
                 self.emit()
 
-    def run(self, order: list[tuple[str, int]]) -> None:
-        """Emit poses until ``_WalkDone``."""
-        self.emit()
-        for _ in range(int(self.rng.integers(3, 7))):  # look around first, as agents do
-            self.yaw = _wrap(self.yaw + TURN)
-            self.emit()
+    def explore(self, budget: int) -> None:
+        """Random places (with a pause and a look at each), until the walk holds ``budget`` poses."""
+        while len(self.poses) < budget:
+            goal = tuple(int(v) for v in self.reachable[self.rng.integers(len(self.reachable))])
+            self.go_to(goal, budget)
+            if len(self.poses) < budget:
+                self.turn_to(float(self.rng.uniform(-np.pi, np.pi)))
+
+    def approach(self, look: Goal, run: tuple[float, float], stop: bool) -> None:
+        """Walk to a spot ``run`` metres further out than the stop, then straight at ``look``, facing it each step."""
+        final = self._stop_spot(look)
+        first = self._approach_start(look, final, run)
+        if not self.near.line_free(first, final):
+            final = first
+        self.go_to(self.grid.cell(first))
+        self.pos = first if np.linalg.norm(first - self.pos) < 0.1 else self.pos
+        goal = np.array([look.x, look.y])
+        self.turn_to(float(np.arctan2(*(goal - self.pos)[::-1])))
         while True:
-            for kind, k in order:
-                if kind == "look" and self.looks:
-                    goal, goal_yaw = self.viewpoint(self.looks[k])
-                else:
-                    goal = tuple(int(v) for v in self.reachable[self.rng.integers(len(self.reachable))])
-                    goal_yaw = float(self.rng.uniform(-np.pi, np.pi))
-                self.go_to(goal)
-                self.turn_to(goal_yaw)
-                if kind == "random":  # pause: a second look at the same view
-                    self.emit()
+            self.yaw = float(np.arctan2(*(goal - self.pos)[::-1]))
+            self.pitch = _pitch_for(self.pos, look, centre=False)
+            self.emit()
+            left = float(np.linalg.norm(final - self.pos))
+            if left < 0.05:
+                break
+            self.pos = self.pos + (final - self.pos) * min(1.0, STEP / left)
+        if stop:  # the agent looks at what it found, then stops
+            self.pitch = _pitch_for(self.pos, look, centre=True)
+            self.emit()
+        self.pitch = 0.0
+
+    def _stop_spot(self, look: Goal) -> np.ndarray:
+        """A free spot (close to furniture allowed) near the stop distance from which the object shows well.
+
+        Candidates: per 30 degree sector around the object, the spot nearest the stop distance;
+        with ``sight``, the one showing most of the object wins, else the nearest to the distance.
+        """
+        cells = np.argwhere(self.near.free)
+        centres = (cells + 0.5) * CELL
+        horizontal = np.hypot(centres[:, 0] - look.x, centres[:, 1] - look.y)
+        distance = np.hypot(horizontal, CAMERA_HEIGHT - look.z)
+        cost = np.abs(distance - look.stop_distance()) + 2.0 * ((horizontal > MAX_STOP) | (horizontal < MIN_STAND))
+        cost = cost + 1e-3 * self.rng.random(len(cost))
+        sector = np.floor((np.arctan2(centres[:, 1] - look.y, centres[:, 0] - look.x) + np.pi) / SECTOR).astype(int)
+        best = [int(np.flatnonzero(sector == k)[np.argmin(cost[sector == k])]) for k in np.unique(sector)]
+        best = sorted(best, key=lambda k: cost[k])
+        if self.sight is None:
+            return centres[best[0]]
+        shows = [self.sight(look, self._facing(centres[k], look)) if cost[k] < 1.0 else 0.0 for k in best]
+        return centres[best[int(np.argmax(shows))]]  # the first (nearest the distance) among equals
+
+    @staticmethod
+    def _facing(at: np.ndarray, look: Goal) -> Pose:
+        yaw = float(np.arctan2(look.y - at[1], look.x - at[0]))
+        return float(at[0]), float(at[1]), yaw, _pitch_for(at, look, centre=True)
+
+    def _approach_start(self, look: Goal, final: np.ndarray, run: tuple[float, float]) -> np.ndarray:
+        """A reachable spot ``run`` metres behind ``final`` (seen from the object), with a straight free line to it."""
+        centres = (self.reachable + 0.5) * CELL
+        away = final - np.array([look.x, look.y])
+        away = away / max(float(np.linalg.norm(away)), 1e-6)
+        offset = centres - final
+        along = offset @ away
+        side = np.abs(offset @ np.array([-away[1], away[0]]))
+        ok = np.flatnonzero((along > run[0]) & (along < run[1]) & (side < 0.6 * along))
+        behind = ok[np.argsort(side[ok] / along[ok] + 0.05 * self.rng.random(len(ok)))]
+        nearest = np.argsort(np.linalg.norm(offset, axis=1))  # no room behind: the nearest spot in sight
+        for k in [*behind[:40], *nearest[:200]]:
+            if self.near.line_free(centres[k], final):
+                return centres[k]
+        return centres[nearest[0]]  # nothing in sight of the stop: stop at the nearest reachable spot instead
