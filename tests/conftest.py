@@ -81,6 +81,14 @@ def real_frameset(tmp_path_factory):
     return build(tmp_path_factory.mktemp("real") / "realset")
 
 
+@pytest.fixture(scope="session")
+def shipped_pasted(tmp_path_factory):
+    """The look-alike set shipped with pin_match, pasted variant: built once per session (offline)."""
+    from pin_match.data.sources.lookalike_set import build
+
+    return build(tmp_path_factory.mktemp("lookalikes") / "pasted", variant="pasted")
+
+
 @pytest.fixture(scope="module")
 def dino_cfg(tmp_path_factory):
     """The tiny timm ViT at 64 px: a 4 x 4 patch grid of 64-dim tokens (feature store and training tests)."""

