@@ -168,7 +168,7 @@ def test_index_page_tells_the_story_and_links_every_page(pages):
     page = check_page(index, [f"set {NASTY}", f"caption {NASTY}", MATCHER_A, MATCHER_B, f"mug C {NASTY}"])
     linked = {(index.parent / unquote(link)).resolve() for link in page.links}
     assert {p.resolve() for p in [*pages["reports"], pages["compare"]]} <= linked
-    assert "First match is the target" in page.text and "against" in page.text
+    assert "First match is the target" in page.text and f"{MATCHER_B} minus {MATCHER_A}" in page.text
 
 
 def test_markdown_tables_keep_their_columns(pages):

@@ -75,7 +75,7 @@ def load_bench(run_dir: str | Path | BenchLayout,
     if not report_files:
         raise AnalysisError(f"no reports under {layout.root / 'reports'}: run `pin-match bench` or "
                             "`pin-match demo` first")
-    tables, sigmas, reports, tuned = {}, {}, {}, {}
+    tables, sigmas, reports = {}, {}, {}
     for path in report_files:
         report = json.loads(path.read_text(encoding="utf-8"))
         name, matcher_id = report["matcher"], report["matcher_id"]
@@ -87,8 +87,11 @@ def load_bench(run_dir: str | Path | BenchLayout,
             raise AnalysisError(f"{path} reports {matcher_id}, but there is no score table under {folder}")
         tables[name] = ScoreTable.read(folder)
         sigmas[name] = float(report["sigma"])  # where it came from: report["sigma_source"]
-        threshold_file = layout.thresholds(name)
-        if threshold_file.exists():
-            tuned[name] = json.loads(threshold_file.read_text(encoding="utf-8"))
         reports[name] = report
-    return BenchRun(layout, ctx, tables, sigmas, reports, tuned)
+    return BenchRun(layout, ctx, tables, sigmas, reports, tuned_thresholds(layout, list(tables)))
+
+
+def tuned_thresholds(layout: BenchLayout, matchers: list[str]) -> dict[str, dict]:
+    """The thresholds files of the matchers whose sigma the bench tuned (the others have none)."""
+    files = {name: layout.thresholds(name) for name in matchers}
+    return {name: json.loads(path.read_text(encoding="utf-8")) for name, path in files.items() if path.exists()}

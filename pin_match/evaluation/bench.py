@@ -20,7 +20,7 @@ from pin_match import atomic
 from pin_match.contract.registry import get_matcher_class
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.analysis import BenchRun, load_bench
+from pin_match.evaluation.analysis import BenchRun, tuned_thresholds
 from pin_match.evaluation.evaluator import EvalContext
 from pin_match.evaluation.layout import BenchLayout
 from pin_match.evaluation.report import report
@@ -72,7 +72,8 @@ class Stopwatch:
 
 @dataclass(frozen=True)
 class Bench:
-    """What ``bench`` wrote: the joint table, each matcher's report, and the folder (loaded, for what comes next)."""
+    """What ``bench`` wrote: the joint table, each matcher's report, and the folder as ``load_bench`` would read it
+    (the matchers in the order they were benched, so ``compare_bench`` compares each with the first)."""
 
     joint: pd.DataFrame
     results: list[dict]
@@ -125,7 +126,10 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
         atomic.write_text(layout.table("md"), f"{caption}\n\n{markdown_table(joint)}\n")
         atomic.write_text(layout.table("tex"), latex_table(joint, caption=caption) + "\n")
         atomic.write_text(layout.table("csv"), joint.to_csv())
-    return Bench(joint, results, load_bench(layout, ctx))
+    reports = {name: {k: v for k, v in r.items() if k != "files"} for name, r in zip(configs, results)}
+    run_loaded = BenchRun(layout, ctx, tables, {name: float(r["sigma"]) for name, r in reports.items()}, reports,
+                          tuned_thresholds(layout, list(configs)))
+    return Bench(joint, results, run_loaded)
 
 
 def _choose(table: ScoreTable, ctx: EvalContext, sigma_from: str, objective: str,

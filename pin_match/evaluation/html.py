@@ -31,7 +31,7 @@ th, td { border: 1px solid #bbb; padding: 0.2em 0.5em; text-align: right; }
 th:first-child, td:first-child { text-align: left; }
 dl { display: grid; grid-template-columns: max-content auto; gap: 0.2em 1em; }
 dt { font-weight: bold; } dd { margin: 0; font-family: monospace; word-break: break-all; }
-.gallery { display: flex; flex-wrap: wrap; gap: 1em; }
+.gallery { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
 figure { margin: 0; border: 1px solid #ccc; padding: 0.4em; background: #f7f7f7; }
 figure.hit { border-color: #0a0; } figure.miss { border-color: #c00; }
 figcaption { font-size: 0.8em; max-width: 330px; }

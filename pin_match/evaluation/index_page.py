@@ -57,15 +57,16 @@ def headline(results: Sequence[dict]) -> str:
 def comparison_lines(c: Comparison) -> list[str]:
     """The paired differences that decide the ranking, each with its interval, and McNemar's count."""
     diff = f"{c.names[1]} - {c.names[0]}"
+    a, b = (name.split("@")[0] for name in c.names)  # the ids are on the compare page
     parts = []
     for metric in ("FM-prec", "AUROC-same", "AUROC"):
         row = c.paired.loc[metric]
         scale = "" if metric.startswith("AUROC") else " points"
         parts.append(f"{metric} {row[diff]:+.3g}{scale} (95 % CI {row['CI low']:+.3g} to {row['CI high']:+.3g})")
     t = c.test
-    return [f"{c.names[1]} against {c.names[0]}: " + "; ".join(parts) + ".",
-            f"First match the target for only {c.names[0]} in {t['only_a']} episodes, only {c.names[1]} in "
-            f"{t['only_b']} (McNemar p = {t['p_value']:.3g})."]
+    return [f"{b} minus {a}: " + "; ".join(parts) + ".",
+            f"The first match was the target for {a} only in {t['only_a']} episodes, for {b} only in {t['only_b']}, "
+            f"for both in {t['both']} (McNemar p = {t['p_value']:.3g})."]
 
 
 def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
