@@ -105,19 +105,15 @@ def test_unknown_object_in_episode(broken):
         FrameSet.load(broken)
 
 
-def test_unknown_episode_in_frames(broken):
-    frames = pd.read_parquet(broken / "frames.parquet")
-    frames.loc[0, "episode_id"] = "ep_nowhere"
-    frames.to_parquet(broken / "frames.parquet")
-    with pytest.raises(FrameSetError, match=r"unknown episode id 'ep_nowhere'"):
-        FrameSet.load(broken)
-
-
-def test_unknown_frame_in_visibility(broken):
-    vis = pd.read_parquet(broken / "visibility.parquet")
-    vis.loc[0, "frame_id"] = "nope_0000"
-    vis.to_parquet(broken / "visibility.parquet")
-    with pytest.raises(FrameSetError, match=r"unknown frame id 'nope_0000'"):
+@pytest.mark.parametrize(("table", "column", "value", "message"), [
+    ("frames.parquet", "episode_id", "ep_nowhere", r"unknown episode id 'ep_nowhere'"),
+    ("visibility.parquet", "frame_id", "nope_0000", r"unknown frame id 'nope_0000'"),
+])
+def test_unknown_id_in_a_table(broken, table, column, value, message):
+    rows = pd.read_parquet(broken / table)
+    rows.loc[0, column] = value
+    rows.to_parquet(broken / table)
+    with pytest.raises(FrameSetError, match=message):
         FrameSet.load(broken)
 
 
