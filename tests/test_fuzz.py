@@ -11,9 +11,11 @@ The numbers of cases are in docs/reliability.md.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import shutil
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pandas as pd
@@ -117,6 +119,23 @@ def _files(root: Path) -> list[Path]:
     return sorted(p for p in root.rglob("*") if p.is_file())
 
 
+@contextlib.contextmanager
+def _damaged_copy(source: Path, plan: list[tuple], name: str) -> Iterator[tuple[Path, Path]]:
+    """(a temporary folder, the copy of ``source`` in it named ``name`` with ``plan``'s damages done)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        root = Path(tmp) / name
+        shutil.copytree(source, root)
+        for kind, file, arg in plan:
+            _damage(root / file, kind, arg)
+        yield Path(tmp), root
+
+
+def _fuzz(cases: int):
+    """Hypothesis settings of a damage test: ``cases`` drawn plans, the same ones every run, no time limit."""
+    return settings(max_examples=cases, deadline=None, derandomize=True,
+                    suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+
+
 def _check_outcome(capsys, rc: int, command: str) -> str:
     err = capsys.readouterr().err
     assert rc in (0, 2), f"exit code {rc}: {err}"
@@ -132,18 +151,12 @@ def frameset_files(tiny_frameset):
     return tiny_frameset.root, [p.relative_to(tiny_frameset.root) for p in _files(tiny_frameset.root)]
 
 
-@settings(max_examples=FRAMESET_CASES, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@_fuzz(FRAMESET_CASES)
 @given(data=st.data())
 def test_damaged_frameset_ends_in_a_named_error(frameset_files, capsys, data):
     source, files = frameset_files
-    plan = data.draw(damages(files))
-    with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp) / "fs"
-        shutil.copytree(source, root)
-        for kind, file, arg in plan:
-            _damage(root / file, kind, arg)
-        out = Path(tmp) / "scores"
+    with _damaged_copy(source, data.draw(damages(files)), "fs") as (tmp, root):
+        out = tmp / "scores"
         rc = main(["score", str(root), "--matcher", "test-slow", "--cfg", "delay=0", "--out", str(out), "--quiet",
                    "--workers", "1"])
         _check_outcome(capsys, rc, "score")
@@ -153,10 +166,10 @@ def test_damaged_frameset_ends_in_a_named_error(frameset_files, capsys, data):
             assert not tables  # no table of a failed run
             return
         rc = main(["report", str(tables[0]), "--frameset", str(root), "--threshold", "100", "--bootstrap", "5",
-                   "--out", str(Path(tmp) / "report")])
+                   "--out", str(tmp / "report")])
         _check_outcome(capsys, rc, "report")
         if rc != 0:
-            assert not (Path(tmp) / "report" / "metrics.json").exists() or rc == 0
+            assert not (tmp / "report" / "metrics.json").exists() or rc == 0
 
 
 # ------------------------------------------------------------------ recordings
@@ -167,21 +180,15 @@ def recording_files(tmp_path_factory):
     return root, [p.relative_to(root) for p in _files(root)]
 
 
-@settings(max_examples=RECORDING_CASES, deadline=None, derandomize=True,
-          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])
+@_fuzz(RECORDING_CASES)
 @given(data=st.data())
 def test_damaged_recording_ends_in_a_named_error(recording_files, capsys, data):
     source, files = recording_files
-    plan = data.draw(damages(files))
-    with tempfile.TemporaryDirectory() as tmp:
-        root = Path(tmp) / "in"
-        shutil.copytree(source, root)
-        for kind, file, arg in plan:
-            _damage(root / file, kind, arg)
-        out = Path(tmp) / "out" / "fs"
+    with _damaged_copy(source, data.draw(damages(files)), "in") as (tmp, root):
+        out = tmp / "out" / "fs"
         rc = main(["import", str(root / "rec"), "--objects", str(root / "objects"), "--out", str(out)])
         _check_outcome(capsys, rc, "import")
-        leftovers = [p.name for p in (Path(tmp) / "out").iterdir()] if (Path(tmp) / "out").exists() else []
+        leftovers = [p.name for p in (tmp / "out").iterdir()] if (tmp / "out").exists() else []
         if rc == 0:
             assert leftovers == ["fs"]
         else:
