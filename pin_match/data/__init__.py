@@ -10,6 +10,7 @@ the synthetic renderer itself is ``synth/``. Nothing here knows a matcher.
 
 from pin_match.data.frameset import FrameSet, FrameSetError
 from pin_match.data.importer import import_recording
-from pin_match.data.writer import FrameRecord, FrameSetWriter, encode_frame
+from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ImageFile, encode_frame
 
-__all__ = ["FrameRecord", "FrameSet", "FrameSetError", "FrameSetWriter", "encode_frame", "import_recording"]
+__all__ = ["Frame", "FrameRecord", "FrameSet", "FrameSetError", "FrameSetWriter", "ImageFile", "encode_frame",
+           "import_recording"]

@@ -37,7 +37,7 @@ from pin_match.data.frameset import (
     FrameSetError,
 )
 from pin_match.data.images import read_image
-from pin_match.data.writer import FrameSetWriter
+from pin_match.data.writer import FrameSetWriter, ImageFile
 
 TARGET_ID, SAME_CATEGORY_ID, OTHER_ID = 100000, 100001, 100002
 # PIN label -> (mask value, role) in the frame-set's instance mask
@@ -198,17 +198,16 @@ def _import_episode(writer: FrameSetWriter, folder: Path, episode_id: str, targe
                 raise FrameSetError(f"{depth[step]}: must be depth in metres of shape {mask.shape}, got "
                                     f"{d.dtype} {d.shape}")
             d = d.reshape(mask.shape).astype(np.float32)
-        ext, data = _stored_image(rgb[step], image_format)
-        writer.add_frame(episode_id, step, image, mask, legend, d, image_ext=ext, image_bytes=data)
+        writer.add_frame(episode_id, step, image, mask, legend, d, file=_stored_image(rgb[step], image_format))
 
 
-def _stored_image(path: Path, image_format: str) -> tuple[str, bytes | None]:
-    """(extension, bytes to store as is or None to encode) for one source frame."""
+def _stored_image(path: Path, image_format: str) -> ImageFile:
+    """How one source frame is stored: re-encoded as PNG or JPEG, or (``source``) its own bytes as they are."""
     if image_format == "png":
-        return ".png", None
+        return ImageFile(".png")
     if image_format == "jpeg":
-        return ".jpg", None
-    return (".jpg" if path.suffix.lower() in JPEG_SUFFIXES else ".png"), path.read_bytes()
+        return ImageFile(".jpg")
+    return ImageFile(".jpg" if path.suffix.lower() in JPEG_SUFFIXES else ".png", path.read_bytes())
 
 
 def _load_array(path: Path) -> np.ndarray:

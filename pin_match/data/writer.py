@@ -40,6 +40,33 @@ from pin_match.data.frameset import (
 VISIBILITY_COLUMNS = ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1", "depth"]
 
 
+@dataclass(frozen=True)
+class Frame:
+    """One camera frame as a source hands it over: the image, its instance mask, what each mask value is, depth.
+
+    ``mask`` holds per-pixel values (0 = background); ``legend`` maps each value to
+    (object id or None when the recording cannot tell instances apart, role). Depth is in metres.
+    """
+
+    image: np.ndarray
+    mask: np.ndarray
+    legend: Mapping[int, tuple[str | None, str]]
+    depth: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class ImageFile:
+    """How a frame's image is stored: its file type, and the bytes of that file when a source already has them.
+
+    ``data``, when given, is the already encoded file of the image (an importer keeping a
+    recording's own bytes) and is stored as is; otherwise the image is encoded (JPEG at
+    quality 95, or lossless PNG).
+    """
+
+    ext: str = ".jpg"
+    data: bytes | None = None
+
+
 @dataclass
 class FrameRecord:
     """The table rows describing one written frame."""
@@ -52,32 +79,29 @@ def frame_id_for(episode_id: str, step: int) -> str:
     return f"{episode_id}_{step:04d}"
 
 
-def encode_frame(root: str | Path, episode_id: str, step: int, image: np.ndarray, mask: np.ndarray,
-                 legend: Mapping[int, tuple[str | None, str]], depth: np.ndarray | None = None,
-                 image_ext: str = ".jpg", image_bytes: bytes | None = None) -> FrameRecord:
-    """Write one frame's image, instance mask and depth under ``root``; derive its visibility rows.
+def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
+                 file: ImageFile = ImageFile()) -> FrameRecord:
+    """Write one frame's image (as ``file`` says), instance mask and depth under ``root``; derive its visibility rows.
 
-    ``mask`` holds per-pixel values (0 = background); ``legend`` maps each value to
-    (object id or None when the recording cannot tell instances apart, role). Depth is in
-    metres and stored in millimetres; mean depths are computed from the stored values so
-    the table agrees with the file exactly. ``image_bytes``, when given, are the already
-    encoded file of ``image`` (an importer keeping a recording's own bytes) and are stored as is.
+    Depth is stored in millimetres; mean depths are computed from the stored values so the
+    table agrees with the file exactly.
     """
     root = Path(root)
     frame_id = frame_id_for(episode_id, step)
+    image, mask, depth = frame.image, frame.mask, frame.depth
     if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
         raise FrameSetError(f"frame {frame_id}: image must be H x W x 3 uint8, got {image.shape} {image.dtype}")
     if mask.shape != image.shape[:2]:
         raise FrameSetError(f"frame {frame_id}: mask shape {mask.shape} differs from image {image.shape[:2]}")
     if mask.max(initial=0) > 65535 or mask.min(initial=0) < 0:
         raise FrameSetError(f"frame {frame_id}: mask values must fit in uint16")
-    rel_image = f"frames/{episode_id}/{step:04d}{image_ext}"
+    rel_image = f"frames/{episode_id}/{step:04d}{file.ext}"
     rel_mask = f"masks/{episode_id}/{step:04d}.png"
-    params = [1, 95] if image_ext in (".jpg", ".jpeg") else []  # cv2.IMWRITE_JPEG_QUALITY = 1
-    if image_bytes is None:
+    params = [1, 95] if file.ext in (".jpg", ".jpeg") else []  # cv2.IMWRITE_JPEG_QUALITY = 1
+    if file.data is None:
         atomic.write_image(root / rel_image, image, params)
     else:
-        atomic.write_bytes(root / rel_image, image_bytes)
+        atomic.write_bytes(root / rel_image, file.data)
     mask16 = mask.astype(np.uint16)
     atomic.write_image(root / rel_mask, mask16)
     row = dict(frame_id=frame_id, episode_id=episode_id, step=int(step), image=rel_image, mask=rel_mask,
@@ -90,7 +114,7 @@ def encode_frame(root: str | Path, episode_id: str, step: int, image: np.ndarray
         depth_mm = np.clip(np.round(np.nan_to_num(depth) * 1000.0), 0, 65535).astype(np.uint16)
         row["depth"] = f"depth/{episode_id}/{step:04d}.png"
         atomic.write_image(root / row["depth"], depth_mm)
-    return FrameRecord(row, visibility_rows(frame_id, mask16, legend, depth_mm))
+    return FrameRecord(row, visibility_rows(frame_id, mask16, frame.legend, depth_mm))
 
 
 def visibility_rows(frame_id: str, mask: np.ndarray, legend: Mapping[int, tuple[str | None, str]],
@@ -183,11 +207,13 @@ class FrameSetWriter:
 
     def add_frame(self, episode_id: str, step: int, image: np.ndarray, mask: np.ndarray,
                   legend: Mapping[int, tuple[str | None, str]], depth: np.ndarray | None = None, *,
-                  image_ext: str | None = None, image_bytes: bytes | None = None) -> str:
+                  file: ImageFile | None = None) -> str:
+        """Write one frame of a known episode (see ``Frame``); its image encoded as the writer's ``image_ext``
+        unless ``file`` says otherwise. Returns its frame id."""
         if episode_id not in self._episodes:
             raise FrameSetError(f"frame of unknown episode id {episode_id!r}")
-        rec = encode_frame(self.staging, episode_id, step, image, mask, legend, depth, image_ext or self.image_ext,
-                           image_bytes)
+        rec = encode_frame(self.staging, episode_id, step, Frame(image, mask, legend, depth),
+                           file or ImageFile(self.image_ext))
         self.add_frame_record(rec)
         return rec.frame["frame_id"]
 

@@ -23,7 +23,7 @@ from pin_match.data.synth.render import Camera, Light, Renderer, reference_views
 from pin_match.data.synth.scene import make_room, place_objects
 from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk
-from pin_match.data.writer import FrameRecord, FrameSetWriter, encode_frame
+from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
 DEFAULTS = dict(seed=0, episodes=24, objects_per_category=10, frames_per_episode=48)
@@ -169,7 +169,7 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
         rgb, ids, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
         mask = lut[np.clip(ids + 1, 0, len(lut) - 1)]
         image = _camera_look(rgb, gain, np.random.default_rng(stable_seed(plan.seed, "noise", step)))
-        records.append(encode_frame(plan.staging, plan.episode_id, step, image, mask, legend, depth))
+        records.append(encode_frame(plan.staging, plan.episode_id, step, Frame(image, mask, legend, depth)))
     return records
 
 
