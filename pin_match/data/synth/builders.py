@@ -386,8 +386,8 @@ BUILDERS: dict[str, Callable[[Parts], None]] = {
 
 # The smallest objects are drawn larger than life: at real size a key ring or a watch seen by a camera
 # 1.31 m high, standing at the table, covers 1,000-1,500 pixels of a 640 x 360 frame, too few for any
-# matcher's features; scaled up to this side area they cover 2,000 or more, as a phone does.
-MIN_SIDE_AREA = 0.01  # m^2
+# matcher's features; scaled up to this side area they cover 2,000 or more where the walk stops.
+MIN_SIDE_AREA = 0.015  # m^2
 
 
 def build(spec: ObjectSpec) -> tuple[Mesh, np.ndarray]:

@@ -12,8 +12,8 @@ furniture or walls):
 3. a pass by a same-category look-alike: a straight approach to it, facing it;
 4. the approach: from 1-1.75 m further out, straight at the target, one frame per step,
    to a stop distance at which the target fills a few thousand pixels (at most 1 m), then
-   the stop: the camera tilts down or up to centre the target (as an agent's look-down
-   action) and the episode ends there.
+   the stop: the camera tilts down or up in two steps to centre the target (as an agent's
+   look-down action) and the episode ends there.
 
 The camera has no pitch except in the approaches (steps 3 and 4), where an object below
 the field of view is brought into it by tilting, as a robot's head would.
@@ -36,7 +36,7 @@ CELL = 0.1
 CLEARANCE = 0.3  # the camera body's radius while exploring
 NEAR_CLEARANCE = 0.1  # how close to furniture the camera may stand when it stops beside an object
 FOCAL_PX = 469.0  # the frame's focal length in pixels (360 px wide, HFOV 42 degrees)
-STOP_PIXELS = 6000.0  # the stop distance shows the object at about this many pixels ...
+STOP_PIXELS = 12000.0  # the stop distance shows the object at about this many pixels ...
 MAX_STOP = 1.0  # ... but never further than this on the floor (PIN's success radius)
 MIN_STOP = 0.45  # the closest a stop may be (3D distance from the camera to the object's centre) ...
 MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal distance)
@@ -246,9 +246,11 @@ class _Walk:
             if left < 0.05:
                 break
             self.pos = self.pos + (final - self.pos) * min(1.0, STEP / left)
-        if stop:  # the agent looks at what it found, then stops
-            self.pitch = _pitch_for(self.pos, look, centre=True)
-            self.emit()
+        if stop:  # the agent looks at what it found, tilting in two steps, then stops
+            centre = _pitch_for(self.pos, look, centre=True)
+            for pitch in ((self.pitch + centre) / 2, centre):
+                self.pitch = pitch
+                self.emit()
         self.pitch = 0.0
 
     def _stop_spot(self, look: Goal) -> np.ndarray:
