@@ -7,6 +7,8 @@ import os
 import numpy as np
 import pytest
 
+from pin_match.contract.matcher import Target
+
 os.environ.setdefault("HF_HUB_OFFLINE", "1")
 os.environ.setdefault("TRANSFORMERS_OFFLINE", "1")
 
@@ -21,6 +23,25 @@ def make_view(color: tuple[int, int, int], size: int = 96, stripe: tuple[int, in
         view[inside & ((xx // 8) % 2 == 0), :3] = stripe
     view[inside, 3] = 255
     return view
+
+
+RED, GREEN, BLUE, YELLOW = (200, 30, 30), (30, 200, 30), (30, 30, 200), (255, 255, 0)
+MUG_DESCRIPTIONS = ("a red mug", "a striped cup", "a mug with yellow stripes")
+
+
+def striped_mug(descriptions: tuple[str, str, str] = MUG_DESCRIPTIONS) -> Target:
+    """'mug_x' (a mug) seen as three discs with yellow stripes, one red, one green, one blue."""
+    return Target("mug_x", "mug", tuple(make_view(c, stripe=YELLOW) for c in (RED, GREEN, BLUE)), descriptions)
+
+
+def red_mug(descriptions: tuple[str, str, str]) -> Target:
+    """'mug_x' (a mug): a red disc with yellow stripes, the same red disc without, and a blue disc."""
+    return Target("mug_x", "mug", (make_view(RED, stripe=YELLOW), make_view(RED), make_view(BLUE)), descriptions)
+
+
+def noise_frame(height: int, width: int, seed: int = 0) -> np.ndarray:
+    """A frame of uniform random pixels."""
+    return np.random.default_rng(seed).integers(0, 256, (height, width, 3), dtype=np.uint8)
 
 
 def paint(image: np.ndarray, mask: np.ndarray, value: int, view: np.ndarray, x0: int, y0: int) -> None:

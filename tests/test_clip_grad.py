@@ -8,7 +8,7 @@ import torch
 import torch.nn.functional as F
 from tiny_weights import save_tiny_hf_clip
 
-from conftest import make_view
+from conftest import noise_frame, red_mug
 from pin_match.contract.crops import crop_boxes
 from pin_match.contract.matcher import Modality, Target
 from pin_match.contract.registry import create_matcher, get_matcher_class
@@ -23,8 +23,7 @@ def tiny_clip(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def target():
-    views = (make_view((200, 30, 30), stripe=(255, 255, 0)), make_view((200, 30, 30)), make_view((30, 30, 200)))
-    return Target("mug_x", "mug", views, ("a red mug with yellow stripes", "a red cup", "a mug on the floor"))
+    return red_mug(("a red mug with yellow stripes", "a red cup", "a mug on the floor"))
 
 
 @pytest.fixture(scope="module")
@@ -32,10 +31,6 @@ def matcher(tiny_clip, target):
     m = create_matcher("clip-grad", weights=tiny_clip)
     m.prepare(target)
     return m
-
-
-def frame(height: int, width: int, seed: int = 0) -> np.ndarray:
-    return np.random.default_rng(seed).integers(0, 256, (height, width, 3), dtype=np.uint8)
 
 
 def test_relevance_equals_hand_computation():
@@ -74,7 +69,7 @@ def test_autograd_relevance_of_tiny_attention_model_equals_analytic():
 
 
 def test_rebuilt_last_block_equals_transformers_forward(matcher):
-    pv = matcher._pixels([frame(360, 360)])
+    pv = matcher._pixels([noise_frame(360, 360)])
     vision = matcher._model.vision_model
     with torch.no_grad():
         reference = F.normalize(matcher._model.get_image_features(pixel_values=pv).pooler_output, dim=-1)
@@ -89,7 +84,7 @@ def test_relevance_maps_equal_gradient_through_eager_attention(tiny_clip, matche
     """Independent route: transformers' own eager attention probabilities, gradient by full backprop."""
     from transformers import CLIPModel
 
-    crops = [frame(360, 360, seed=1), frame(360, 360, seed=2)]
+    crops = [noise_frame(360, 360, seed=1), noise_frame(360, 360, seed=2)]
     ours = matcher.relevance_maps(crops)
     model = CLIPModel.from_pretrained(tiny_clip, attn_implementation="eager").eval()
     pv = matcher._pixels(crops).requires_grad_(True)
@@ -110,7 +105,7 @@ def test_registered_with_paper_settings():
 
 @pytest.mark.parametrize("shape", [(640, 360), (301, 517)])
 def test_results_are_valid_and_deterministic(matcher, shape):
-    image = frame(*shape, seed=4)
+    image = noise_frame(*shape, seed=4)
     first, second = matcher.match(image), matcher.match(image)
     assert first.crop_scores is not None and len(first.crop_scores) == 2
     # the upsampled map never exceeds its 7x7 grid; its best stored point is the score
@@ -129,7 +124,7 @@ def test_results_are_valid_and_deterministic(matcher, shape):
 def test_points_follow_sigma_and_stride(tiny_clip, target):
     coarse = create_matcher("clip-grad", weights=tiny_clip, point_stride=40)
     coarse.prepare(target)
-    r = coarse.match(frame(360, 360, seed=5))
+    r = coarse.match(noise_frame(360, 360, seed=5))
     # the 224 map's pixels 20, 60, ..., 220 per side, plus its maximum when that is off the grid
     centres = (np.arange(20, 224, 40) + 0.5) * 360 / 224 - 0.5
     on_grid = (np.abs(r.points[:, :, None] - centres).min(axis=-1) < 1e-3).all(axis=1)
@@ -288,7 +283,7 @@ COW_SHAPES = [(640, 360), (301, 517), (150, 420), (97, 97)]
 
 @pytest.mark.parametrize("shape", COW_SHAPES)
 def test_score_equals_cow_upsampled_relevance_max(matcher, cow_reference, shape):
-    image = frame(*shape, seed=11)
+    image = noise_frame(*shape, seed=11)
     ref = cow_reference(image)
     result = matcher.match(image)
     assert ref.shape[:2] == (len(crop_boxes(*shape)), 3)
@@ -301,7 +296,7 @@ def test_score_equals_cow_upsampled_relevance_max(matcher, cow_reference, shape)
 
 @pytest.mark.parametrize("shape", COW_SHAPES)
 def test_matched_frames_always_have_points(matcher, cow_reference, shape):
-    image = frame(*shape, seed=11)
+    image = noise_frame(*shape, seed=11)
     ref = cow_reference(image).numpy()
     result = matcher.match(image)
     margin = 1e-4 * result.score  # far above the reference/matcher difference (rtol 1e-5 above)

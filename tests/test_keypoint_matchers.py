@@ -11,9 +11,9 @@ from tiny_weights import save_tiny_lightglue, save_tiny_superglue, save_tiny_sup
 from transformers.models.lightglue.modeling_lightglue import normalize_keypoints as lightglue_normalize
 from transformers.models.superglue.modeling_superglue import normalize_keypoints as superglue_normalize
 
-from conftest import make_view
+from conftest import striped_mug
 from pin_match.contract import registry
-from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality, Target
+from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
 from pin_match.contract.registry import create_matcher
 from pin_match.matchers.ieve import gated_count
 from pin_match.matchers.keypoints import (
@@ -38,8 +38,7 @@ def lightglue_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def target():
-    views = tuple(make_view(c, stripe=(255, 255, 0)) for c in [(200, 30, 30), (30, 200, 30), (30, 30, 200)])
-    return Target("mug_x", "mug", views, ("a red mug", "a striped cup", "a mug with yellow stripes"))
+    return striped_mug()
 
 
 # ---------------------------------------------------------------------------- reference preparation

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from tiny_weights import save_tiny_owl
 
-from conftest import make_view
+from conftest import striped_mug
 from pin_match.contract.matcher import ConfigError, MatcherError, Modality, Target
 from pin_match.contract.registry import create_matcher
 from pin_match.matchers.owl import clip_tokenizer, closest_reference, owl_verdict
@@ -19,8 +19,7 @@ def owl_dir(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def target():
-    views = tuple(make_view(c, stripe=(255, 255, 0)) for c in [(200, 30, 30), (30, 200, 30), (30, 30, 200)])
-    return Target("mug_x", "mug", views, ("a red mug", "a striped cup", "a mug with yellow stripes"))
+    return striped_mug()
 
 
 def frames():

@@ -11,7 +11,7 @@ import torch
 import torch.nn.functional as F
 from tiny_weights import SAM_PATCH, SAM_SIZE, save_tiny_sam
 
-from conftest import make_view
+from conftest import make_view, noise_frame, red_mug
 from pin_match.contract.matcher import Target
 from pin_match.contract.registry import create_matcher, get_matcher_class
 from pin_match.contract.weights import WeightsError
@@ -27,8 +27,7 @@ def tiny_sam(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def target():
-    views = (make_view((200, 30, 30), stripe=(255, 255, 0)), make_view((200, 30, 30)), make_view((30, 30, 200)))
-    return Target("mug_x", "mug", views, ("d0", "d1", "d2"))
+    return red_mug(("d0", "d1", "d2"))
 
 
 @pytest.fixture(scope="module", params=["persam", "persam-f"])
@@ -36,10 +35,6 @@ def matcher(request, tiny_sam, target):
     m = create_matcher(request.param, weights=tiny_sam, **({"iterations": 5} if request.param == "persam-f" else {}))
     m.prepare(target)
     return m
-
-
-def frame(height: int, width: int, seed: int = 0) -> np.ndarray:
-    return np.random.default_rng(seed).integers(0, 256, (height, width, 3), dtype=np.uint8)
 
 
 def sam_processor():
@@ -228,7 +223,7 @@ def test_registered_with_paper_settings():
 
 @pytest.mark.parametrize("shape", [(640, 360), (301, 517)])
 def test_results_are_valid_and_every_matched_frame_has_points(matcher, shape):
-    image = frame(*shape, seed=2)
+    image = noise_frame(*shape, seed=2)
     first, second = matcher.match(image), matcher.match(image)
     assert len(first.points_at(first.score)) > 0  # the best crop's mask (or its positive point) at any sigma
     assert (first.points[:, 0] < shape[1]).all() and (first.points[:, 1] < shape[0]).all()
@@ -242,7 +237,7 @@ def test_matcher_equals_personalize_sam(tiny_sam, target, name, shape):
     """Score, positive point and final mask of the matcher against Personalize-SAM's own steps for one reference
     view (a target whose three views are that view, so the best reference is that view)."""
     options = {"iterations": 5} if name == "persam-f" else {}
-    image = frame(*shape, seed=9)
+    image = noise_frame(*shape, seed=9)
     for view in (target.views[0] if shape[0] == 360 else target.views[2],):  # both views over the parameters
         m = create_matcher(name, weights=tiny_sam, crops="whole", point_stride=4, **options)
         m.prepare(Target("one", "mug", (view,) * 3, ("a", "b", "c")))
