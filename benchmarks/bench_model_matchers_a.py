@@ -9,12 +9,9 @@ hits the 1024-keypoint cap: the keypoint figures are the worst case of PIN's set
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
-import torch
-
-from benchmarks.timing import bench_inputs, time_matchers
+from benchmarks.timing import time_random_models
 
 
 def _save_models(root: Path) -> dict[str, Path]:
@@ -27,7 +24,6 @@ def _save_models(root: Path) -> dict[str, Path]:
         SuperGlueForKeypointMatching,
     )
 
-    torch.manual_seed(0)
     paths = {"superglue": root / "superglue", "lightglue": root / "lightglue", "owl": root / "owlvit-b32"}
     SuperGlueForKeypointMatching(SuperGlueConfig()).save_pretrained(paths["superglue"])
     LightGlueForKeypointMatching(LightGlueConfig()).save_pretrained(paths["lightglue"])
@@ -35,19 +31,19 @@ def _save_models(root: Path) -> dict[str, Path]:
     return paths
 
 
+def _options(paths: dict[str, str]) -> dict[str, dict]:
+    return {
+        "superglue": {"weights": paths["superglue"]},
+        "lightglue": {"weights": paths["lightglue"]},
+        "ieve": {"gate_cfg": {"weights": paths["owl"]}},  # its keypoint part, disk-lightglue, carries its weights
+        "owl": {"weights": paths["owl"]},
+        "owl-image": {"weights": paths["owl"]},
+    }
+
+
 def run(quick: bool) -> dict:
     """Milliseconds per frame (mean over timed frames after one warm-up) and prepare seconds per matcher."""
-    target, images = bench_inputs(quick)
-    with tempfile.TemporaryDirectory() as tmp:
-        paths = {k: str(v) for k, v in _save_models(Path(tmp)).items()}
-        options = {
-            "superglue": {"weights": paths["superglue"]},
-            "lightglue": {"weights": paths["lightglue"]},
-            "ieve": {"gate_cfg": {"weights": paths["owl"]}},  # its keypoint part, disk-lightglue, carries its weights
-            "owl": {"weights": paths["owl"]},
-            "owl-image": {"weights": paths["owl"]},
-        }
-        return time_matchers(options, target, images)
+    return time_random_models(_save_models, _options, quick)
 
 
 if __name__ == "__main__":

@@ -7,32 +7,28 @@ saved with save_pretrained and loaded through ``weights=`` like any local overri
 
 from __future__ import annotations
 
-import tempfile
 from pathlib import Path
 
-import torch
-
-from benchmarks.timing import bench_inputs, time_matchers
+from benchmarks.timing import time_random_models
 
 
 def _save_models(root: Path) -> dict[str, Path]:
     from transformers import CLIPConfig, CLIPModel, SamConfig, SamModel
 
-    torch.manual_seed(0)
     paths = {"clip": root / "clip-vit-b32", "sam": root / "sam-vit-b"}
     CLIPModel(CLIPConfig()).save_pretrained(paths["clip"])
     SamModel(SamConfig()).save_pretrained(paths["sam"])
     return paths
 
 
+def _options(paths: dict[str, str]) -> dict[str, dict]:
+    return {name: {"weights": paths[model]} for name, model in (("clip-grad", "clip"), ("persam", "sam"),
+                                                                 ("persam-f", "sam"))}
+
+
 def run(quick: bool) -> dict:
     """Milliseconds per frame (mean over timed frames after one warm-up) and prepare seconds per matcher."""
-    target, images = bench_inputs(quick)
-    with tempfile.TemporaryDirectory() as tmp:
-        paths = _save_models(Path(tmp))
-        options = {name: {"weights": str(paths[model])}
-                   for name, model in (("clip-grad", "clip"), ("persam", "sam"), ("persam-f", "sam"))}
-        return time_matchers(options, target, images)
+    return time_random_models(_save_models, _options, quick)
 
 
 if __name__ == "__main__":

@@ -12,6 +12,7 @@ import tempfile
 import time
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -99,3 +100,14 @@ def time_matchers(options: dict[str, dict], target: Target, images: list[np.ndar
     for name, row in out.items():
         print(f"{name:<10} {row['ms_per_frame']:>10.1f} {row['prepare_s']:>10.2f} {row['frames']:>7}")
     return out
+
+
+def time_random_models(save: Callable[[Path], Mapping[str, Path]],
+                       options: Callable[[dict[str, str]], dict[str, dict]], quick: bool) -> dict[str, dict]:
+    """``time_matchers`` on models with random weights: ``save(folder)`` writes them (torch seeded 0 first) and
+    returns each one's folder by key; ``options`` maps those folders to each matcher's config overrides."""
+    target, images = bench_inputs(quick)
+    with tempfile.TemporaryDirectory() as tmp:
+        torch.manual_seed(0)
+        paths = {key: str(path) for key, path in save(Path(tmp)).items()}
+        return time_matchers(options(paths), target, images)
