@@ -32,7 +32,7 @@ def _cmd_fusion(a: argparse.Namespace) -> None:
     from pin_match.fitting.fusion import fit_fusion
 
     spec = fit_fusion(a.frameset, components(a.component), a.out, split=a.split, out=a.cache, l2=a.l2,
-                      points_from=a.points_from, progress=run_options(a).progress)
+                      progress=run_options(a).progress)
     terms = " ".join(f"{c['coef']:+.3g} {c['matcher']}" for c in spec["components"])
     print(f"fusion logit {spec['intercept']:.3g} {terms} on {spec['fitted_on']['frames']} frames "
           f"{spec['fitted_on']['classes']} -> {a.out}\n"
@@ -84,10 +84,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("frameset", type=Path, help="frame-set folder, fitted on its --split")
     s.add_argument("--component", nargs="+", action="append", required=True, metavar="NAME [KEY=VALUE ...]",
                    help="a component matcher and its config overrides, transform=identity|log1p for its score "
-                        "(default identity); repeat per component, e.g. --component effnet "
+                        "(default identity); repeat per component, the first giving the fusion's points, e.g. "
+                        "--component effnet "
                         "--component effnet layer=blocks.3 img_size=224 --component xfeat transform=log1p")
-    s.add_argument("--points-from", type=int, default=0,
-                   help="index of the component whose points the fusion returns (default 0)")
     s.add_argument("--cache", type=Path, default=SCORES, help=f"score cache of the components (default {SCORES})")
 
     v = fits.add_parser("verifier", help="logistic verifier of candidate regions' signals (the verify matcher)")

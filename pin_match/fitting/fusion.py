@@ -58,16 +58,14 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
 
 
 def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], path: str | Path, *,
-               split: str = "train", out: str | Path = outputs.SCORES, l2: float = 1.0, points_from: int = 0,
+               split: str = "train", out: str | Path = outputs.SCORES, l2: float = 1.0,
                progress: bool = False) -> dict[str, Any]:
     """Fit the weights on ``split`` of ``frameset`` and write the fusion file to ``path`` (atomically).
 
-    ``components`` are (matcher name, config overrides, transform); ``points_from`` indexes the
-    component whose points the fusion returns (one that always has points, such as a patch matcher).
+    ``components`` are (matcher name, config overrides, transform); the fusion returns the first
+    component's points (``points_from`` 0), so put one that always has points, such as a patch matcher, first.
     """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
-    if not 0 <= points_from < len(components):
-        raise FitError(f"fusion fit: points_from={points_from} does not index the {len(components)} components")
     labels, records = component_scores(fs, components, split, out, progress)
     y, weights, counts = fit_classes(labels)
     x = np.column_stack([[TRANSFORMS[r["transform"]](float(s)) for s in labels[f"s{i}"]]
@@ -76,7 +74,7 @@ def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], pat
     for record, coef in zip(records, beta[1:]):
         record["coef"] = float(coef)
     spec = dict(format=FUSION_FORMAT, version=FUSION_VERSION, intercept=float(beta[0]), components=records,
-                points_from=points_from,
+                points_from=0,
                 fitted_on=dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint, split=split,
                                frames=len(labels), classes=counts, l2=l2,
                                objective="weighted logistic regression, target vs rest; target, same-category "
