@@ -2,7 +2,8 @@
 
 Every writer in pin_match goes through here: the bytes land in a temporary file in
 the destination folder and are renamed over the target only once complete, so a reader
-sees either the old file or the whole new one.
+sees either the old file or the whole new one. ``read_json`` reads a JSON file back (one
+written here or by hand) with an error naming the file.
 """
 
 from __future__ import annotations
@@ -72,6 +73,14 @@ def write_text(path: str | os.PathLike, text: str) -> None:
 
 def write_json(path: str | os.PathLike, obj: Any) -> None:
     write_text(path, json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n")
+
+
+def read_json(path: Path, error: type[PinMatchError]) -> Any:
+    """The JSON value in ``path``, or ``error`` naming the file when its text is not UTF-8 JSON."""
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise error(f"{path} is not valid JSON: {exc}") from exc
 
 
 def _json_default(obj: Any) -> Any:

@@ -9,7 +9,6 @@ documented in docs/frameset.md; ``FORMAT_VERSION`` is bumped on every incompatib
 from __future__ import annotations
 
 import hashlib
-import json
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pin_match import atomic
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, Target, TargetError
 from pin_match.data.images import read_image, read_label_png
 from pin_match.errors import PinMatchError
@@ -180,10 +180,7 @@ class FrameSet:
 def _read_json(path: Path) -> dict:
     if not path.exists():
         raise FrameSetError(f"missing file {path}")
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FrameSetError(f"{path} is not valid JSON: {exc}") from exc
+    data = atomic.read_json(path, FrameSetError)
     if not isinstance(data, dict):
         raise FrameSetError(f"{path} must hold a JSON object, not {type(data).__name__}")
     return data

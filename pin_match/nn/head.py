@@ -94,10 +94,7 @@ def read_head_config(folder: str | Path) -> dict:
     path = Path(folder) / CONFIG_FILE
     if not path.is_file():
         raise HeadError(f"{folder} is not a head folder (no {CONFIG_FILE}); train one with pin-match train")
-    try:
-        config = json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise HeadError(f"{path} is not valid JSON: {exc}") from exc
+    config = atomic.read_json(path, HeadError)
     if config.get("format") != HEAD_FORMAT or not isinstance(config.get("version"), int) \
             or config["version"] > HEAD_VERSION:
         raise HeadError(f"{path} is not a {HEAD_FORMAT} config of version <= {HEAD_VERSION}")
