@@ -68,58 +68,40 @@ def test_fingerprint_changes_with_content(broken, tiny_frameset):
     assert FrameSet.load(broken).fingerprint != tiny_frameset.fingerprint
 
 
-def test_missing_manifest(broken):
-    (broken / MANIFEST).unlink()
-    with pytest.raises(FrameSetError, match=r"missing file .*frameset\.json"):
-        FrameSet.load(broken)
-
-
-def test_newer_format_version(broken):
-    _edit_json(broken / MANIFEST, lambda d: d.__setitem__("version", 99))
-    with pytest.raises(FrameSetError, match=r"frameset\.json has format version 99.*upgrade pin_match"):
-        FrameSet.load(broken)
-
-
-def test_missing_reference_view(broken):
-    (broken / "objects_images" / "mug_b" / "mug_b_1.png").unlink()
-    with pytest.raises(FrameSetError, match=r"object 'mug_b'.*holds 2 reference views, expected 3"):
-        FrameSet.load(broken)
-
-
-def test_missing_reference_folder(broken):
-    shutil.rmtree(broken / "objects_images" / "ball_a")
-    with pytest.raises(FrameSetError, match=r"object 'ball_a': missing reference folder"):
-        FrameSet.load(broken)
-
-
-def test_two_descriptions(broken):
-    _edit_json(broken / "objects_descriptions.json", lambda d: d["mug_c"].pop())
-    with pytest.raises(FrameSetError, match=r"object 'mug_c'.*holds 2 descriptions, expected 3"):
-        FrameSet.load(broken)
-
-
-def test_unknown_object_in_episode(broken):
-    _edit_json(broken / "episodes.json", lambda d: d["episodes"][0]["distractors"].append(
-        {"object_id": "ghost", "object_category": "mug"}))
-    with pytest.raises(FrameSetError, match=r"episode 'ep_train' refers to unknown object id 'ghost'"):
-        FrameSet.load(broken)
-
-
-@pytest.mark.parametrize(("table", "column", "value", "message"), [
-    ("frames.parquet", "episode_id", "ep_nowhere", r"unknown episode id 'ep_nowhere'"),
-    ("visibility.parquet", "frame_id", "nope_0000", r"unknown frame id 'nope_0000'"),
-])
-def test_unknown_id_in_a_table(broken, table, column, value, message):
-    rows = pd.read_parquet(broken / table)
+def _set_first_cell(path, column, value):
+    rows = pd.read_parquet(path)
     rows.loc[0, column] = value
-    rows.to_parquet(broken / table)
+    rows.to_parquet(path)
+
+
+# each damage done to a copy of the tiny frame-set, and the error that must name it
+DAMAGES = {
+    "missing manifest": (lambda root: (root / MANIFEST).unlink(), r"missing file .*frameset\.json"),
+    "newer format version": (lambda root: _edit_json(root / MANIFEST, lambda d: d.__setitem__("version", 99)),
+                             r"frameset\.json has format version 99.*upgrade pin_match"),
+    "missing reference view": (lambda root: (root / "objects_images" / "mug_b" / "mug_b_1.png").unlink(),
+                               r"object 'mug_b'.*holds 2 reference views, expected 3"),
+    "missing reference folder": (lambda root: shutil.rmtree(root / "objects_images" / "ball_a"),
+                                 r"object 'ball_a': missing reference folder"),
+    "two descriptions": (lambda root: _edit_json(root / "objects_descriptions.json", lambda d: d["mug_c"].pop()),
+                         r"object 'mug_c'.*holds 2 descriptions, expected 3"),
+    "unknown object in episode": (
+        lambda root: _edit_json(root / "episodes.json", lambda d: d["episodes"][0]["distractors"].append(
+            {"object_id": "ghost", "object_category": "mug"})),
+        r"episode 'ep_train' refers to unknown object id 'ghost'"),
+    "unknown episode in frames": (lambda root: _set_first_cell(root / "frames.parquet", "episode_id", "ep_nowhere"),
+                                  r"unknown episode id 'ep_nowhere'"),
+    "unknown frame in visibility": (lambda root: _set_first_cell(root / "visibility.parquet", "frame_id", "nope_0000"),
+                                    r"unknown frame id 'nope_0000'"),
+    "missing frame file": (lambda root: (root / "frames" / "ep_val" / "0002.jpg").unlink(),
+                           r"frame 'ep_val_0002': missing image file .*0002\.jpg"),
+}
+
+
+@pytest.mark.parametrize(("damage", "message"), DAMAGES.values(), ids=DAMAGES.keys())
+def test_a_damaged_frameset_is_refused_by_name(broken, damage, message):
+    damage(broken)
     with pytest.raises(FrameSetError, match=message):
-        FrameSet.load(broken)
-
-
-def test_missing_frame_file(broken):
-    (broken / "frames" / "ep_val" / "0002.jpg").unlink()
-    with pytest.raises(FrameSetError, match=r"frame 'ep_val_0002': missing image file .*0002\.jpg"):
         FrameSet.load(broken)
 
 
