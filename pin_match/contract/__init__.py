@@ -17,6 +17,7 @@ from pin_match.contract.matcher import (
     MatcherError,
     MatchResult,
     Modality,
+    Preset,
     Target,
     TargetError,
     crops_field,
@@ -51,7 +52,7 @@ from pin_match.errors import PinMatchError
 
 __all__ = [
     "ENTRY_POINT_GROUP", "N_DESCRIPTIONS", "N_VIEWS", "POLICIES", "ConfigError", "ContractError", "Crop", "CropConfig",
-    "CropMatcher", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError",
+    "CropMatcher", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError", "Preset",
     "RegistrationError", "Target", "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec",
     "available_names", "build_config", "check_matcher", "content_digest", "create_matcher", "crop_boxes", "crops_field",
     "get_matcher_class", "list_matchers", "load_torch_state", "merge_crop_results", "misfit", "parse_overrides",
