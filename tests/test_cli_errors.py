@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import argparse
+
 import pytest
 
 from pin_match.cli import build_parser, main
@@ -52,12 +54,27 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["features", missing, "--backbone", "effnet"],
         ["train", fs, "--out", f"{tmp}/head", "--holdout", "2"],
         ["train", missing, "--out", f"{tmp}/head"],
+        ["list", "no-such-matcher"],
+        ["fit", "fusion", missing, "--component", "color", "--out", f"{tmp}/fusion.json"],
+        ["fit", "fusion", fs, "--component", "no-such-matcher", "--out", f"{tmp}/fusion.json"],
+        ["fit", "verifier", missing, "--out", f"{tmp}/verify.json"],
+        ["fit", "verifier-report", "--train", missing, "--eval", fs],
     ]
 
 
+def _leaf_commands(parser: argparse.ArgumentParser) -> set[tuple[str, ...]]:
+    """Every command as the words that name it: ``("score",)``, ``("data", "build")``, ``("fit", "fusion")``."""
+    groups = [a for a in parser._actions if isinstance(a, argparse._SubParsersAction)]
+    return {(name, *rest) for g in groups for name, sub in g.choices.items()
+            for rest in (_leaf_commands(sub) or {()})}
+
+
 def test_the_bad_arguments_cover_every_command(tiny_frameset, tmp_path):
-    commands = set(build_parser()._subparsers._group_actions[0].choices) - {"list"}  # list takes no bad value
-    assert commands == {args[0] for args in bad_arguments(str(tiny_frameset.root), str(tmp_path))}
+    commands = _leaf_commands(build_parser()) - {("data", "list")}  # its only option is a flag: nothing to get wrong
+    assert {("data", "build"), ("fit", "verifier-report"), ("list",)} <= commands
+    cases = bad_arguments(str(tiny_frameset.root), str(tmp_path))
+    covered = {c for c in commands if any(tuple(args[:len(c)]) == c for args in cases)}
+    assert covered == commands, f"commands without a bad-arguments case: {sorted(commands - covered)}"
 
 
 @pytest.mark.parametrize("index", range(len(bad_arguments("FS", "TMP"))),

@@ -47,7 +47,8 @@ def _cmd_prepare(a: argparse.Namespace) -> None:
 def add_commands(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser("data", help="list, prepare and build frame-sets from the catalogue of data sources",
                        description=DATA_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    group = d.add_subparsers(dest="data_command", required=True)
+    group = d.add_subparsers(dest="data_command", required=True, metavar="{list,build,prepare}",
+                             help="what to do with the catalogue")
 
     s = group.add_parser("list", help="the sources: variants, what prepare reads, whether --src is needed")
     s.add_argument("-v", "--verbose", action="store_true", help="also what each source holds and its licence")
