@@ -135,13 +135,7 @@ class LightGlueMatcher(SuperPointGlueMatcher):
     weights_spec = LIGHTGLUE_WEIGHTS
     paper = "Lindenberger et al., LightGlue: Local Feature Matching at Light Speed, ICCV 2023"
     version = 2  # what each version changed: docs/baselines.md
-
-    def _from_pretrained(self, source: str) -> torch.nn.Module:
-        from transformers import LightGlueConfig, LightGlueForKeypointMatching
-
-        config = LightGlueConfig.from_pretrained(source)
-        self._configure_detector(config.keypoint_detector_config)
-        return LightGlueForKeypointMatching.from_pretrained(source, config=config)
+    transformers_classes = ("LightGlueConfig", "LightGlueForKeypointMatching")
 
     def _match_pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         return lightglue_pair(self._model, obs, ref, self.cfg.match_threshold)

@@ -92,13 +92,7 @@ class SuperGlueMatcher(SuperPointGlueMatcher):
     weights_spec = SUPERGLUE_WEIGHTS
     paper = "Sarlin et al., SuperGlue: Learning Feature Matching with Graph Neural Networks, CVPR 2020"
     version = 3  # what each version changed: docs/baselines.md
-
-    def _from_pretrained(self, source: str) -> torch.nn.Module:
-        from transformers import SuperGlueConfig, SuperGlueForKeypointMatching
-
-        config = SuperGlueConfig.from_pretrained(source)
-        self._configure_detector(config.keypoint_detector_config)
-        return SuperGlueForKeypointMatching.from_pretrained(source, config=config)
+    transformers_classes = ("SuperGlueConfig", "SuperGlueForKeypointMatching")
 
     def _match_pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         return superglue_pair(self._model, obs, ref, self.cfg.sinkhorn_iterations, self.cfg.match_threshold)

@@ -74,20 +74,27 @@ class SuperPointConfig(KeypointConfig):
 class SuperPointGlueMatcher(ReferenceKeypointMatcher):
     """transformers' SuperPoint keypoints of the grayscale frame matched against PIN's six prepared references.
 
-    Subclasses say how to build their transformers model (SuperPoint + a graph matcher) and pair
-    one observation-reference pair with it.
+    Subclasses name their transformers model (SuperPoint + a graph matcher, ``transformers_classes``)
+    and pair one observation-reference pair with it.
     """
 
     Config = SuperPointConfig
     weights_spec: ClassVar[WeightsSpec]
+    # transformers' config and model classes of the graph matcher, by name, so transformers loads with the model only
+    transformers_classes: ClassVar[tuple[str, str]]
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)
         self._model: torch.nn.Module | None = None
 
-    @abstractmethod
     def _from_pretrained(self, source: str) -> torch.nn.Module:
         """The model from a hub id or a save_pretrained folder, its SuperPoint set up by ``_configure_detector``."""
+        import transformers
+
+        config_class, model_class = (getattr(transformers, name) for name in self.transformers_classes)
+        config = config_class.from_pretrained(source)
+        self._configure_detector(config.keypoint_detector_config)
+        return model_class.from_pretrained(source, config=config)
 
     @abstractmethod
     def _match_pair(self, obs: Keypoints, ref: Keypoints) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
