@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import shutil
 
 import numpy as np
@@ -158,3 +159,21 @@ def test_writer_rejects_unlabelled_mask_value(tmp_path):
         with pytest.raises(FrameSetError, match="mask value 7 has no entry in the legend"):
             w.add_frame("e", 0, np.zeros((16, 16, 3), np.uint8), mask, {1: ("o", "target")})
         w.abort()
+
+
+@pytest.mark.parametrize("bad", ["shelf/mug", "..", "a\\b", ""])
+@pytest.mark.parametrize("kind", ["object", "episode"])
+def test_writer_refuses_an_id_that_is_not_a_folder_name(tmp_path, kind, bad):
+    """An id with '/' would write nested folders that FrameSet.load never finds: refused when added."""
+    view = np.zeros((8, 8, 4), np.uint8)
+    view[2:6, 2:6] = 255
+    with FrameSetWriter(tmp_path / "fs") as w:
+        w.add_object("o", "mug", "val", [view] * 3, ["a", "b", "c"])
+        with pytest.raises(FrameSetError, match=re.escape(f"{kind} id {bad!r} is not a plain name")):
+            if kind == "object":
+                w.add_object(bad, "mug", "val", [view] * 3, ["a", "b", "c"])
+            else:
+                w.add_episode(bad, "val", "s", "o", [])
+        w.add_episode("e.1", "val", "s", "o", [])  # a dot inside a name is fine
+        w.abort()
+    assert not list(tmp_path.iterdir())

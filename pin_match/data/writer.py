@@ -75,6 +75,14 @@ class FrameRecord:
     visibility: list[dict]
 
 
+def check_id(kind: str, value: str) -> None:
+    """Refuse an id that is not one plain folder name: object and episode ids name folders of the frame-set, so a
+    '/' would nest folders the loader never finds and '..' would write outside it."""
+    if not isinstance(value, str) or value in ("", ".", "..") or "/" in value or "\\" in value:
+        raise FrameSetError(f"{kind} id {value!r} is not a plain name (no '/', '\\', '.' or '..'): it names a "
+                            f"folder of the frame-set")
+
+
 def frame_id_for(episode_id: str, step: int) -> str:
     return f"{episode_id}_{step:04d}"
 
@@ -167,6 +175,7 @@ class FrameSetWriter:
 
     def add_object(self, object_id: str, category: str, split: str, views: Sequence[np.ndarray],
                    descriptions: Sequence[str]) -> None:
+        check_id("object", object_id)
         if object_id in self._objects:
             raise FrameSetError(f"object id {object_id!r} added twice")
         if split not in SPLITS:
@@ -183,6 +192,7 @@ class FrameSetWriter:
 
     def add_episode(self, episode_id: str, split: str, scene_id: str, target_object_id: str,
                     distractor_object_ids: Sequence[str]) -> None:
+        check_id("episode", episode_id)
         if episode_id in self._episodes:
             raise FrameSetError(f"episode id {episode_id!r} added twice")
         for object_id in [target_object_id, *distractor_object_ids]:
