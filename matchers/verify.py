@@ -22,8 +22,11 @@ with the references'. This matcher does that with the default ``effnet``:
    log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop,
    off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
-   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id):
-   each candidate's score is the fitted probability that it is the target, the frame's is its
+   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id),
+   with a colour gate: below ``color_gate`` each point of colour overlap missing costs the
+   fitted gate slope in logit, so a candidate of the wrong colour fails whatever its shape and
+   texture say (one linear colour weight cannot be large on recolours and small on toys at
+   once). Each candidate's score is the fitted probability that it is the target, the frame's is its
    best candidate's. A probability means one thing on every frame-set, but its level carries only
    partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
    each with its candidate's score, and the boxes come back with the result.
@@ -68,11 +71,13 @@ SIGNALS = ("proto", "margin", "desc", "cycle", "color", "keypoints")
 # off by default, on with --cfg signals=... and a verifier file fitted for them
 DEFAULT_SIGNALS = ("proto", "margin", "desc", "cycle", "color")
 VERIFIER_FORMAT = "pin-match-verifier"
-VERIFIER_VERSION = 1
+VERIFIER_VERSION = 2  # 2: the colour gate
 # a candidate crop is a few hundred pixels: half the keypoints of a whole frame cover it
 KEYPOINT_DEFAULTS = {"crops": "whole", "max_keypoints": 256}
 REFERENCE_PAD = 0.1  # a reference view is cut to its mask's box plus this share per side, as a candidate is padded
 ZOOM_SIGNALS = ("desc", "cycle", "color")  # the signals that need the candidate embedded again
+# chosen by cross-validation over MyVLM's train instances (docs/instance-matchers.md)
+DEFAULT_COLOR_GATE = 0.8
 
 
 @dataclass
@@ -91,6 +96,9 @@ class VerifyConfig(MatcherConfig):
     region_drop: float = field(default=0.1, metadata={"help": "a region holds the cells within this of its peak"})
     pad: float = field(default=0.15, metadata={"help": "share of a candidate box added on each side"})
     color_bins: tuple[int, ...] = field(default=(16, 4, 4), metadata={"help": "HSV histogram bins"})
+    color_gate: float = field(default=DEFAULT_COLOR_GATE, metadata={
+        "help": "colour overlap below which a candidate's logit drops in proportion to the shortfall (the verifier "
+                "file's fitted gate slope); 0: no gate, colour only adds"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -104,6 +112,9 @@ class VerifyConfig(MatcherConfig):
             raise ConfigError(f"{type(self).__name__}: color_bins={self.color_bins!r}; three positive counts (H, S, V)")
         if not 0.0 <= self.pad <= 1.0 or self.region_drop < 0.0:
             raise ConfigError(f"{type(self).__name__}: pad must be in [0, 1] and region_drop >= 0")
+        if not 0.0 <= self.color_gate < 1.0 or (self.color_gate and "color" not in self.signals):
+            raise ConfigError(f"{type(self).__name__}: color_gate={self.color_gate!r}; in [0, 1), and above 0 only "
+                              f"with the color signal")
 
 
 @dataclass
@@ -120,18 +131,33 @@ class Reference:
 def read_verifier(path: Path) -> dict[str, Any]:
     """The verifier file, checked: every problem is a WeightsError naming the file."""
     spec = read_fitted_file(path, "verifier", VERIFIER_FORMAT, VERIFIER_VERSION)
-    coefs = spec.get("coefs")
-    numbers = [*coefs.values(), spec.get("intercept")] if isinstance(coefs, dict) else []
-    if not numbers[:-1] or set(coefs) - set(SIGNALS) \
-            or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers):
-        raise WeightsError(f"verifier file {path}: needs a finite 'intercept' and 'coefs' {{signal: finite number}} "
-                           f"over signals of {', '.join(SIGNALS)}")
+    coefs, gate = spec.get("coefs"), spec.get("gate")
+    fields_ok = isinstance(coefs, dict) and bool(coefs) and not set(coefs) - set(SIGNALS) and isinstance(gate, dict)
+    numbers = [*coefs.values(), spec.get("intercept"), gate.get("floor"), gate.get("coef")] if fields_ok else []
+    if not fields_ok or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers) \
+            or (gate["floor"] and "color" not in coefs):
+        raise WeightsError(f"verifier file {path}: needs a finite 'intercept', 'coefs' {{signal: finite number}} "
+                           f"over signals of {', '.join(SIGNALS)} and a 'gate' {{floor, coef}} (floor 0: none; "
+                           f"above 0 only with color)")
     return spec
 
 
+def color_shortfall(color: float, floor: float) -> float:
+    """How far a candidate's colour overlap falls below the gate's floor (0 at or above it): the gate's input."""
+    return min(color - floor, 0.0)
+
+
 def verdict(spec: dict[str, Any], signals: dict[str, float]) -> float:
-    """The fitted probability that a candidate with these signals is the target."""
+    """The fitted probability that a candidate with these signals is the target.
+
+    The gate is one more term, but one that only subtracts: a candidate whose colours fall short
+    of the floor loses logit in proportion, whatever its shape and texture say, while colours
+    above the floor add no more than the linear colour term does.
+    """
     logit = float(spec["intercept"]) + sum(float(c) * signals[s] for s, c in spec["coefs"].items())
+    gate = spec["gate"]
+    if gate["floor"]:
+        logit += float(gate["coef"]) * color_shortfall(signals["color"], float(gate["floor"]))
     return 1.0 / (1.0 + math.exp(-min(max(logit, -60.0), 60.0)))
 
 
@@ -144,9 +170,9 @@ class VerifyMatcher(CompositeMatcher):
     weights_spec = FittedFileSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
                                   distribution="pin-match",
                                   license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
-    # PIN's first-match objective on MyVLM's train instances, both variants (docs/instance-matchers.md); how far this
+    # PIN's first-match objective on MyVLM pasted's train instances (docs/instance-matchers.md); how far this
     # one sigma carries to other sets is measured there: tune it on frames like the agent's
-    default_sigma = 0.596
+    default_sigma = 0.658
     version = 1
     paper = ("detect, then re-identify (CNOS, Nguyen et al., ICCVW 2023; NIDS-Net, Lu et al., 2024) with "
              "cycle-consistent cell matches (Matcher, Liu et al., ICLR 2024) and a colour check (PInVerify, 2026)")
@@ -170,11 +196,11 @@ class VerifyMatcher(CompositeMatcher):
 
     @property
     def signals_id(self) -> str:
-        """Hash of everything the signals' values depend on: not the verifier file, nor which signals are used (an
-        ablation reads the same cached signals)."""
+        """Hash of everything the signals' values depend on: not the verifier file, which signals are used or the
+        colour gate (an ablation reads the same cached signals)."""
         config = self.cfg.hashed_dict()
-        config.pop("weights", None)
-        config.pop("signals")
+        for decision_only in ("weights", "signals", "color_gate"):
+            config.pop(decision_only, None)
         payload = dict(version=self.version, config=config, parts={r: p.id for r, p in self.parts().items()})
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
@@ -183,10 +209,12 @@ class VerifyMatcher(CompositeMatcher):
         """The verifier file, refused unless it was fitted on exactly this matcher's signals."""
         path = self.weights_spec.resolve(self.cfg.weights, f"matcher {self.display_name}")
         spec = read_verifier(path)
-        if set(spec["coefs"]) != set(self.cfg.signals) or spec.get("signals_id") != self.signals_id:
+        if set(spec["coefs"]) != set(self.cfg.signals) or spec.get("signals_id") != self.signals_id \
+                or spec["gate"]["floor"] != self.cfg.color_gate:
             raise WeightsError(f"verifier file {path} was fitted on signals {sorted(spec['coefs'])} (signals id "
-                               f"{spec.get('signals_id')}), this matcher computes {sorted(self.cfg.signals)} (signals "
-                               f"id {self.signals_id}): refit it with pin_match.fitting.verifier.fit_verifier")
+                               f"{spec.get('signals_id')}, colour gate {spec['gate']['floor']}), this matcher computes "
+                               f"{sorted(self.cfg.signals)} (signals id {self.signals_id}, colour gate "
+                               f"{self.cfg.color_gate}): refit it with pin_match.fitting.verifier.fit_verifier")
         return spec
 
     def weights_hint(self, role: str) -> str:

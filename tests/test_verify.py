@@ -9,9 +9,24 @@ import pandas as pd
 import pytest
 
 from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
-from pin_match.fitting.verifier import candidate_classes, candidate_table, fit_verifier, frame_scores, on_target
+from pin_match.fitting.verifier import (
+    candidate_classes,
+    candidate_table,
+    fit_verifier,
+    frame_scores,
+    on_target,
+    target_share,
+)
+from pin_match.fitting.verifier_report import candidate_lines, candidate_recall, signal_sets
 from pin_match.matchers.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
-from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, read_verifier, verdict
+from pin_match.matchers.verify import (
+    DEFAULT_COLOR_GATE,
+    DEFAULT_SIGNALS,
+    SIGNALS,
+    color_shortfall,
+    read_verifier,
+    verdict,
+)
 
 FAST = dict(signals=("proto", "margin", "desc", "color"), candidates=2)  # no keypoints: quick
 
@@ -70,6 +85,7 @@ def test_a_candidate_is_on_the_target_by_share_or_fill():
     assert not on_target((0, 0, 15, 100), target)  # 100 inside: a quarter of the target, 7 % of the box
     assert on_target((25, 25, 35, 35), target)     # 25 inside a 100-pixel box: it fills a quarter
     assert not on_target((0, 0, 50, 50), np.zeros((100, 100), bool))
+    assert target_share((0, 0, 20, 30), target) == pytest.approx(0.5) and target_share((0, 0, 5, 5), target) == 0.0
 
 
 def test_candidate_classes_drop_off_target_candidates_of_target_frames_and_balance_classes():
@@ -82,16 +98,52 @@ def test_candidate_classes_drop_off_target_candidates_of_target_frames_and_balan
     assert counts == {"target": 1, "same_category": 2, "other": 1}
 
 
+# ------------------------------------------------------------------ the report's pieces
+def test_candidate_recall_counts_target_frames_that_some_box_covers_by_half():
+    labels = pd.DataFrame(dict(frame_id=["a", "b", "c", "d"], target_visible=[True, True, True, False]))
+    table = pd.DataFrame(dict(frame_id=["a", "a", "b", "d"], cover=[0.2, 0.6, 0.4, 0.0]))
+    # a: its second box holds 60 %; b: 40 % at best; c: no candidate at all; d shows no target
+    assert candidate_recall(table, labels) == pytest.approx(1 / 3)
+
+
+def test_ablation_rows_without_colour_have_no_gate_and_the_default_is_also_read_ungated():
+    rows = signal_sets()
+    assert rows["default"] == dict(signals=DEFAULT_SIGNALS)
+    assert rows["default, no gate"] == dict(signals=DEFAULT_SIGNALS, color_gate=0.0)
+    assert rows["proto alone"] == dict(signals=("proto",), color_gate=0.0)
+    assert rows["without keypoints"] == dict(signals=DEFAULT_SIGNALS)
+    for overrides in rows.values():
+        create_matcher("verify", **overrides)  # every row is a valid configuration
+
+
+def test_each_candidate_says_why_it_decided():
+    spec = dict(intercept=0.0, coefs={"proto": 1.0, "color": 1.0}, gate=dict(floor=0.5, coef=10.0))
+    cands = pd.DataFrame(dict(candidate=[0, 1], proto=[0.5, 0.5], color=[0.2, 0.5]))
+    probabilities, lines = candidate_lines(cands, spec)
+    assert probabilities == pytest.approx([1 / (1 + np.exp(2.3)), 1 / (1 + np.exp(-1.0))])  # 0.7 - 3.0; 1.0
+    assert lines[0] == "#0 p 0.09, colour gated\n  pr 0.50 co 0.20" and lines[1] == "#1 p 0.73\n  pr 0.50 co 0.50"
+
+
 # ------------------------------------------------------------------ the file
-def verifier_file(path, signals_id, coefs, intercept=-1.0):
-    path.write_text(json.dumps(dict(format="pin-match-verifier", version=1, signals_id=signals_id,
-                                    intercept=intercept, coefs=coefs)))
+def verifier_file(path, signals_id, coefs, intercept=-1.0, gate=None):
+    gate = gate or dict(floor=DEFAULT_COLOR_GATE if "color" in coefs else 0.0, coef=5.0)
+    path.write_text(json.dumps(dict(format="pin-match-verifier", version=2, signals_id=signals_id,
+                                    intercept=intercept, coefs=coefs, gate=gate)))
     return path
 
 
 def test_verdict_is_the_logistic_of_the_file():
-    spec = dict(intercept=-1.0, coefs={"proto": 2.0, "color": 4.0})
+    spec = dict(intercept=-1.0, coefs={"proto": 2.0, "color": 4.0}, gate=dict(floor=0.0, coef=0.0))
     assert verdict(spec, {"proto": 0.5, "color": 0.25}) == pytest.approx(1 / (1 + np.exp(-1.0)))
+
+
+def test_the_colour_gate_only_subtracts_below_its_floor():
+    spec = dict(intercept=-1.0, coefs={"proto": 2.0, "color": 4.0}, gate=dict(floor=0.5, coef=10.0))
+    # colour 0.25 is 0.25 short of the floor: logit -1 + 1 + 1 - 10 x 0.25 = -1.5
+    assert verdict(spec, {"proto": 0.5, "color": 0.25}) == pytest.approx(1 / (1 + np.exp(1.5)))
+    # at or above the floor the gate adds nothing: -1 + 1 + 2.4 = 2.4
+    assert verdict(spec, {"proto": 0.5, "color": 0.6}) == pytest.approx(1 / (1 + np.exp(-2.4)))
+    assert color_shortfall(0.7, 0.5) == 0.0 and color_shortfall(0.2, 0.5) == pytest.approx(-0.3)
 
 
 def test_bad_files_and_configs_are_refused_by_name(tmp_path):
@@ -105,6 +157,14 @@ def test_bad_files_and_configs_are_refused_by_name(tmp_path):
         read_verifier(bad)
     with pytest.raises(WeightsError, match="finite 'intercept'"):
         read_verifier(verifier_file(tmp_path / "v.json", "x", {"shape": 1.0}))
+    with pytest.raises(WeightsError, match="above 0 only with color"):  # a gate on a colour the file never weighs
+        read_verifier(verifier_file(tmp_path / "v.json", "x", {"proto": 1.0}, gate=dict(floor=0.5, coef=1.0)))
+    with pytest.raises(ConfigError, match="color_gate"):
+        create_matcher("verify", signals=("proto", "desc"))
+    gated = verifier_file(tmp_path / "gated.json", create_matcher("verify", **FAST).signals_id,
+                          {s: 1.0 for s in FAST["signals"]}, gate=dict(floor=0.3, coef=1.0))
+    with pytest.raises(WeightsError, match="colour gate 0.3"):
+        _ = create_matcher("verify", weights=str(gated), **FAST).decision
     matcher = create_matcher("verify", **FAST)
     stale = verifier_file(tmp_path / "stale.json", "000000000000", {s: 1.0 for s in FAST["signals"]})
     with pytest.raises(WeightsError, match="stale.json was fitted on .*refit"):
@@ -122,6 +182,8 @@ def test_the_id_hashes_the_file_and_the_signals_id_does_not(tmp_path):
     second = create_matcher("verify", weights=str(path), **FAST)
     assert first != second.id and second.signals_id == matcher.signals_id
     assert create_matcher("verify", **{**FAST, "zoom_size": 224}).signals_id != matcher.signals_id
+    # the gate decides from the same signals: another floor, the same cached table
+    assert create_matcher("verify", **{**FAST, "color_gate": 0.0}).signals_id == matcher.signals_id
 
 
 # ------------------------------------------------------------------ fit and live matcher
@@ -130,6 +192,7 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
     spec = fit_verifier([tiny_frameset], tmp_path / "all.json", split="train", overrides=every,
                         out=tmp_path / "features")
     assert spec["fitted_on"]["classes"]["target"] >= 1 and set(spec["coefs"]) == set(SIGNALS)
+    assert spec["gate"]["floor"] == DEFAULT_COLOR_GATE and spec["gate"]["coef"] != 0.0
     # an ablation reads the same cached signals: one table, one signals id
     path = tmp_path / "v.json"
     spec = fit_verifier([tiny_frameset], path, split="train", overrides=FAST, out=tmp_path / "features")
@@ -156,9 +219,10 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
 
 
 def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
-    matcher = create_matcher("verify", signals=("proto", "margin"))
+    locate_only = dict(signals=("proto", "margin"), color_gate=0.0)
+    matcher = create_matcher("verify", **locate_only)
     path = verifier_file(tmp_path / "v.json", matcher.signals_id, {"proto": 4.0, "margin": 1.0}, intercept=-2.0)
-    matcher = create_matcher("verify", signals=("proto", "margin"), weights=str(path))
+    matcher = create_matcher("verify", weights=str(path), **locate_only)
     episode = tiny_frameset.episodes.iloc[0]
     matcher.prepare(tiny_frameset.target(episode.target_object_id))
     zoom_passes = []

@@ -63,7 +63,8 @@ def _cmd_verifier_report(a: argparse.Namespace) -> None:
     result = report(a.train, a.eval, a.features)
     with pd.option_context("display.width", 200, "display.max_rows", 500):
         print(pd.DataFrame(result["rows"]).round(3).to_string(index=False))
-    print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"]), indent=1))
+    print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"],
+                          candidate_recall=result["candidate_recall"]), indent=1))
     if a.json:
         atomic.write_json(a.json, result)
     if a.figure:

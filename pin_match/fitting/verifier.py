@@ -29,12 +29,27 @@ from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
-from pin_match.matchers.verify import SIGNALS, VERIFIER_FORMAT, VERIFIER_VERSION, VerifyMatcher, read_verifier, verdict
+from pin_match.matchers.verify import (
+    SIGNALS,
+    VERIFIER_FORMAT,
+    VERIFIER_VERSION,
+    VerifyMatcher,
+    color_shortfall,
+    read_verifier,
+    verdict,
+)
 from pin_match.scoring.cache import cache_dir, read_meta
 from pin_match.scoring.schema import encode_meta
 
 ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
 TARGET_FILL = 0.25     # ... or of the box covered by the target
+
+
+def target_share(box: Sequence[int], target: np.ndarray) -> float:
+    """The share of the target's visible pixels (the boolean mask ``target``) inside a box; 0 without a target."""
+    total = int(target.sum())
+    x0, y0, x1, y1 = box
+    return int(target[y0:y1, x0:x1].sum()) / total if total else 0.0
 
 
 def on_target(box: Sequence[int], target: np.ndarray) -> bool:
@@ -49,7 +64,8 @@ def on_target(box: Sequence[int], target: np.ndarray) -> bool:
 
 def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = outputs.FEATURES, batch_size: int = 4,
                     progress: bool = False) -> pd.DataFrame:
-    """One row per candidate of every frame of ``fs``: its box, whether it is on the target, its signals.
+    """One row per candidate of every frame of ``fs``: its box, whether it is on the target (and ``cover``, the
+    share of the target's pixels inside the box), its signals.
 
     Cached by the score cache's folder rule, ``cache_dir(out, "verify-signals@<signals_id>",
     fingerprint)``, one file per set of splits (a split of a frame-set keeps the whole set's
@@ -66,14 +82,22 @@ def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = o
             table = pd.read_parquet(found)
             return table[table.episode_id.isin(episodes)].reset_index(drop=True)
     table = compute_candidates(fs, matcher, batch_size, progress)
+    store_candidates(fs, matcher, table, out)
+    return table
+
+
+def store_candidates(fs: FrameSet, matcher: VerifyMatcher, table: pd.DataFrame, out: str | Path) -> Path:
+    """Write ``fs``'s candidate table where ``candidate_table`` finds it, with the metadata it checks."""
     signals = [s for s in SIGNALS if s in table.columns]
     meta = dict(kind="verify candidate signals", signals_id=matcher.signals_id, signals=signals,
                 frameset_fingerprint=fs.fingerprint, frameset_name=fs.manifest.get("name", ""),
-                episodes=sorted(episodes), pin_match_version=pin_match.__version__)
+                episodes=sorted(set(fs.episodes.episode_id)), pin_match_version=pin_match.__version__)
     stored = pa.Table.from_pandas(table, preserve_index=False)
     stored = stored.replace_schema_metadata({**(stored.schema.metadata or {}), **encode_meta(meta)})
-    atomic.write_parquet(folder / f"candidates_{'+'.join(sorted(set(fs.episodes.split)))}.parquet", stored)
-    return table
+    path = cache_dir(out, f"verify-signals@{matcher.signals_id}", fs.fingerprint) \
+        / f"candidates_{'+'.join(sorted(set(fs.episodes.split)))}.parquet"
+    atomic.write_parquet(path, stored)
+    return path
 
 
 def compute_candidates(fs: FrameSet, matcher: VerifyMatcher, batch_size: int, progress: bool) -> pd.DataFrame:
@@ -89,7 +113,8 @@ def compute_candidates(fs: FrameSet, matcher: VerifyMatcher, batch_size: int, pr
                 for k, (cand, signals) in enumerate(found):
                     rows.append(dict(frame_id=frame_id, episode_id=episode.episode_id, split=episode.split,
                                      candidate=k, x0=cand.box[0], y0=cand.box[1], x1=cand.box[2], y1=cand.box[3],
-                                     on_target=on_target(cand.box, target), **signals))
+                                     on_target=on_target(cand.box, target), cover=target_share(cand.box, target),
+                                     **signals))
         if progress:
             print(f"verify signals: {fs.root.name} episode {n}/{len(fs.episodes)}", file=sys.stderr)
     return pd.DataFrame(rows)
@@ -128,11 +153,14 @@ def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *
         labels.append(frame_labels(fs).assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
         sources.append(dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint))
     used, weights, counts = candidate_classes(pd.concat(tables, ignore_index=True), pd.concat(labels))
-    signals = list(matcher.cfg.signals)
-    y = used.on_target.to_numpy(float)
-    beta = logistic_fit(used[signals].to_numpy(float), y, weights, l2)
+    signals, floor = list(matcher.cfg.signals), matcher.cfg.color_gate
+    features = used[signals].to_numpy(float)
+    if floor:  # the gate's input is one more feature; its coefficient is the gate's slope
+        features = np.c_[features, [color_shortfall(c, floor) for c in used.color]]
+    beta = logistic_fit(features, used.on_target.to_numpy(float), weights, l2)
     spec = dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
                 intercept=float(beta[0]), coefs={s: float(c) for s, c in zip(signals, beta[1:])},
+                gate=dict(floor=floor, coef=float(beta[-1]) if floor else 0.0),
                 fitted_on=dict(framesets=sources, split=split, candidates=len(used), classes=counts, l2=l2,
                                objective="weighted logistic regression, candidate on the target vs candidates of "
                                          "frames without it; target, same-category and other classes weigh the "

@@ -32,12 +32,23 @@ from pin_match.fitting.verifier import candidate_table, fit_verifier, frame_scor
 from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, verdict
 
 
-def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, tuple[str, ...]]:
-    """The ablation's rows: the default signals, all, each alone, each left out of all."""
+def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, dict]:
+    """The ablation's rows as ``verify`` overrides: the default, it without the colour gate, all signals, each alone,
+    each left out of all (a set without ``color`` has no gate)."""
     sets = {"default": DEFAULT_SIGNALS, "all": tuple(signals)}
     sets.update({f"{s} alone": (s,) for s in signals})
     sets.update({f"without {s}": tuple(x for x in signals if x != s) for s in signals})
-    return sets
+    rows = {label: dict(signals=s) if "color" in s else dict(signals=s, color_gate=0.0) for label, s in sets.items()}
+    rows["default, no gate"] = dict(signals=DEFAULT_SIGNALS, color_gate=0.0)
+    return rows
+
+
+def candidate_recall(table: pd.DataFrame, labels: pd.DataFrame, share: float = 0.5) -> float:
+    """Share of the target frames where some candidate box holds at least ``share`` of the target's visible pixels:
+    what no signal can rescue when it fails."""
+    target_frames = set(labels.frame_id[labels.target_visible])
+    best = table[table.frame_id.isin(target_frames)].groupby("frame_id").cover.max()
+    return float((best.reindex(sorted(target_frames)).fillna(0.0) >= share).mean()) if target_frames else float("nan")
 
 
 def split_labels(fs: FrameSet, split: str | None) -> pd.DataFrame:
@@ -70,8 +81,8 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
               {**{Path(p).name: fs for p, fs in zip(train, train_sets)}, **eval_sets}.items()}
     rows, sigmas = [], {}
     with tempfile.TemporaryDirectory() as tmp:
-        specs = {label: fit_verifier(train_sets, Path(tmp) / "v.json", overrides={"signals": s}, out=features)
-                 for label, s in signal_sets().items()}
+        specs = {label: fit_verifier(train_sets, Path(tmp) / "v.json", overrides=overrides, out=features)
+                 for label, overrides in signal_sets().items()}
     scorers = {"effnet": effnet_scores, **{f"verify {label}": (lambda t, s=spec: frame_scores(t, s))
                                            for label, spec in specs.items()}}
     dev_names = [Path(p).name for p in train]
@@ -88,11 +99,14 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
             arrays = frame_arrays(frames)
             low, high = bootstrap_ci(arrays, sigmas[name], clusters=clusters[set_name], boot=boot)["auroc_same"] \
                 or (np.nan, np.nan)
-            at = detection_metrics(arrays, sigmas[name])
+            own = sigma_for(frames)  # the set's own best sigma, to see what the development sigma gives up
+            at, at_own = detection_metrics(arrays, sigmas[name]), detection_metrics(arrays, own)
             ranking = ranking_metrics(arrays)
             rows.append(dict(matcher=name, set=set_name, auroc_same=ranking["auroc_same"], low=low, high=high,
                              auroc=ranking["auroc_target"], sigma=sigmas[name],
-                             tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"]))
+                             tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"],
+                             first_precision=at["first_match_precision"], own_sigma=own,
+                             own_cm=at_own["cm_pct"], own_first_precision=at_own["first_match_precision"]))
     paired = {}
     for set_name, labels in eval_labels.items():
         a = scored(labels, effnet_scores(tables[set_name]))
@@ -101,13 +115,29 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
                                  clusters=clusters[set_name], boot=boot).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
                                 high=float(diff["CI high"]))
-    return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs)
+    recall = {name: candidate_recall(tables[name], labels) for name, labels in eval_labels.items()
+              if "cover" in tables[name]}
+    return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs, candidate_recall=recall)
+
+
+def candidate_lines(cands: pd.DataFrame, spec: dict) -> tuple[list[float], list[str]]:
+    """Each candidate's probability and two lines of why: its number, probability, whether the colour gate cut it,
+    and every signal the file weighs (two letters each: pr proto, ma margin, de desc, cy cycle, co color)."""
+    floor = spec["gate"]["floor"]
+    probabilities, lines = [], []
+    for row in cands.to_dict("records"):
+        probabilities.append(verdict(spec, row))
+        signals = " ".join(f"{s[:2]} {row[s]:.2f}" for s in spec["coefs"])
+        gated = ", colour gated" if floor and row["color"] < floor else ""
+        lines.append(f"#{row['candidate']} p {probabilities[-1]:.2f}{gated}\n  {signals}")
+    return probabilities, lines
 
 
 def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str | Path, per_row: int = 6) -> Path:
-    """What the verifier decided, as a picture: the highest-scoring look-alike frames over the lowest-scoring target
-    frames, each with its candidate boxes (white: the best, labelled with its probability; grey: the others), the
-    objects' masks outlined in their roles' colours and the target's first reference in the corner."""
+    """What the verifier decided and why, as a picture: the highest-scoring look-alike frames over the lowest-scoring
+    target frames, each with every candidate box numbered (white: the best; grey: the others) and, under the frame,
+    each candidate's probability and signals; the objects' masks outlined in their roles' colours and the target's
+    first reference in the corner."""
     import cv2
     import matplotlib.pyplot as plt
 
@@ -116,21 +146,24 @@ def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str |
     frames = scored(frame_labels(fs), frame_scores(table, spec))
     same = frames[frames.same_visible & ~frames.target_visible].nlargest(per_row, "score")
     target = frames[frames.target_visible].nsmallest(per_row, "score")
-    fig, axes = plt.subplots(2, per_row, figsize=(2.2 * per_row, 8.4), squeeze=False)
+    fig, axes = plt.subplots(2, per_row, figsize=(2.8 * per_row, 11.0), squeeze=False)
     for row, (title, chosen) in enumerate((("look-alike only, highest", same), ("target, lowest", target))):
         for ax, frame in zip(axes[row], chosen.itertuples()):
             image = draw_frame(fs, frame.frame_id)
             cands = table[table.frame_id == frame.frame_id]
-            probability = frame_scores(cands, spec).score.iloc[0]
-            best = cands.candidate.iloc[int(np.argmax([verdict(spec, r) for r in cands.to_dict("records")]))]
-            for cand in cands.itertuples():
-                colour = (255, 255, 255) if cand.candidate == best else (140, 140, 140)
+            probabilities, lines = candidate_lines(cands, spec)
+            best = int(np.argmax(probabilities))
+            for k, cand in enumerate(cands.itertuples()):
+                colour = (255, 255, 255) if k == best else (140, 140, 140)
                 cv2.rectangle(image, (int(cand.x0), int(cand.y0)), (int(cand.x1) - 1, int(cand.y1) - 1), colour, 3)
+                cv2.putText(image, str(cand.candidate), (int(cand.x0) + 4, int(cand.y1) - 8),
+                            cv2.FONT_HERSHEY_SIMPLEX, 1.2, colour, 3)
             reference = thumbnail(on_checkerboard(fs.target(fs.episode(frame.episode_id).target_object_id).views[0]),
                                   110)
             image[:reference.shape[0], :reference.shape[1]] = reference
             ax.imshow(image)
-            ax.set_title(f"{title}\n{frame.frame_id[-22:]}\np={probability:.2f}", fontsize=7)
+            ax.set_title(f"{title}\n{frame.frame_id[-22:]}\np={max(probabilities):.2f}", fontsize=7)
+            ax.text(0.0, -0.02, "\n".join(lines), transform=ax.transAxes, fontsize=5.5, va="top", family="monospace")
         for ax in axes[row]:
             ax.axis("off")
     fig.tight_layout()
