@@ -59,7 +59,7 @@ def _print(title: str, rows: list[dict]) -> None:
 
 def run(quick: bool = False) -> dict:
     from pin_match.nn.head import load_head
-    from pin_match.training import TrainConfig, compare_with_frozen, scored_from_store, sigma_on_split, train
+    from pin_match.training import Backbone, TrainConfig, compare_with_frozen, scored_from_store, sigma_on_split, train
     from pin_match.training.config import default_backbone
     from pin_match.training.features import build_features
 
@@ -85,7 +85,7 @@ def run(quick: bool = False) -> dict:
 
     cfg = TrainConfig(epochs=3, hidden=32, threads=THREADS) if quick else TrainConfig(threads=THREADS)
     head_dir = CACHE / "heads" / f"{backbone}{'_quick' if quick else ''}"
-    wall = once(lambda: got.update(config=train(fs, head_dir, backbone=backbone, overrides=overrides, store=store,
+    wall = once(lambda: got.update(config=train(fs, head_dir, backbone=Backbone(backbone, overrides), features=store,
                                                 cfg=cfg, progress=False))).wall_s
     config = got["config"]
     train_seconds = round(sum(h["seconds"] for h in config["history"]), 1)

@@ -73,11 +73,11 @@ def trained_head(bench_run, tmp_path_factory):
     """A head trained for 2 epochs on the bench frame-set with the tiny random ViT (05_training reads it)."""
     from tiny_weights import save_tiny_timm_vit
 
-    from pin_match.training import TrainConfig, train
+    from pin_match.training import Backbone, TrainConfig, train
 
     root = tmp_path_factory.mktemp("training")
     backbone_cfg = dict(model_name="test_vit", img_size=64, weights=str(save_tiny_timm_vit(root / "vit")))
-    train(bench_run / "frameset", root / "head", backbone="dino", overrides=backbone_cfg, features=root / "features",
+    train(bench_run / "frameset", root / "head", backbone=Backbone("dino", backbone_cfg), features=root / "features",
           cfg=TrainConfig(epochs=2, hidden=16, threads=1), progress=False)
     return root
 

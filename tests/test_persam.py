@@ -4,6 +4,7 @@ independent re-implementation of Personalize-SAM's persam.py / persam_f.py on th
 from __future__ import annotations
 
 import math
+from typing import Any, NamedTuple
 
 import numpy as np
 import pytest
@@ -67,6 +68,14 @@ def point_selection(sim: torch.Tensor, largest: bool = True) -> list[int]:
     return [flat - row * sim.shape[1], row]
 
 
+class Encoded(NamedTuple):
+    """What ``set_image`` leaves for ``predict``: SAM's image embeddings, the processor's sizes, the image."""
+
+    feats: torch.Tensor
+    sizes: Any
+    image: np.ndarray
+
+
 class PersonalizeSam:
     """Personalize-SAM's test loop (and PerSAM-F's training) for one reference, on transformers' SamModel, with
     transformers' SamProcessor for the coordinate transforms and the mask postprocessing (its own code, not the
@@ -74,22 +83,22 @@ class PersonalizeSam:
 
     def __init__(self, model, view: np.ndarray, fine_tune: bool, iterations: int = 0, lr: float = 1e-3):
         self.model, self.proc, self.fine_tune = model, sam_processor(), fine_tune
-        feats, sizes = self.set_image(view[..., :3])
-        target = feats[0].permute(1, 2, 0)[reference_cells(view[..., 3])]  # (n, C)
+        ref = self.set_image(view[..., :3])
+        target = ref.feats[0].permute(1, 2, 0)[reference_cells(view[..., 3])]  # (n, C)
         embedding = 0.5 * target.max(0).values + 0.5 * target.mean(0) if fine_tune else target.mean(0)
         self.target_embedding = embedding[None, None]
         self.target_feat = F.normalize(embedding[None], dim=-1)
         if fine_tune:
-            self.weights = self.train(feats, sizes, torch.from_numpy(view[..., 3] > 0).float().flatten()[None],
-                                      iterations, lr)
+            self.weights = self.train(ref, torch.from_numpy(view[..., 3] > 0).float().flatten()[None], iterations, lr)
 
-    def set_image(self, image):
+    def set_image(self, image) -> Encoded:
         enc = self.proc(images=image, return_tensors="pt")
         with torch.no_grad():
-            return self.model.get_image_embeddings(enc["pixel_values"]), enc
+            return Encoded(self.model.get_image_embeddings(enc["pixel_values"]), enc, image)
 
-    def predict(self, feats, sizes, image, points, labels, box=None, mask_input=None, multimask=True, **extra):
-        enc = self.proc(images=image, input_points=[[points]], input_labels=[[labels]],
+    def predict(self, img: Encoded, points, labels, box=None, mask_input=None, multimask=True, **extra):
+        feats, sizes = img.feats, img.sizes
+        enc = self.proc(images=img.image, input_points=[[points]], input_labels=[[labels]],
                         input_boxes=None if box is None else [[box]], return_tensors="pt")
         with torch.no_grad():
             out = self.model(image_embeddings=feats, input_points=enc["input_points"].float(),
@@ -100,17 +109,17 @@ class PersonalizeSam:
                                             binarize=False)[0][0]
         return high > 0, out.iou_scores[0, 0], out.pred_masks[0, 0], high
 
-    def similarity(self, feats, sizes):
+    def similarity(self, img: Encoded):
+        feats, sizes = img.feats, img.sizes
         c, h, w = feats[0].shape
         sim = (self.target_feat @ F.normalize(feats[0], dim=0).reshape(c, h * w)).reshape(1, 1, h, w)
         sim = F.interpolate(sim, scale_factor=4, mode="bilinear")
         return self.proc.post_process_masks(sim[None], sizes["original_sizes"], sizes["reshaped_input_sizes"],
                                             binarize=False)[0][0, 0]
 
-    def train(self, feats, sizes, gt, iterations, lr):
-        image = np.zeros((*sizes["original_sizes"][0].tolist(), 3), np.uint8)  # only its size is read
-        pos = point_selection(self.similarity(feats, sizes))
-        _, _, _, high = self.predict(feats, sizes, image, [pos], [1])
+    def train(self, ref: Encoded, gt, iterations, lr):
+        pos = point_selection(self.similarity(ref))
+        _, _, _, high = self.predict(ref, [pos], [1])
         free = torch.nn.Parameter(torch.ones(2, 1) / 3)
         optimizer = torch.optim.AdamW([free], lr=lr, eps=1e-4)
         scheduler = torch.optim.lr_scheduler.CosineAnnealingLR(optimizer, iterations)
@@ -136,26 +145,26 @@ class PersonalizeSam:
 
     def segment(self, image):
         """(score, positive point, final mask) for one test image."""
-        feats, sizes = self.set_image(image)
-        sim = self.similarity(feats, sizes)
+        img = self.set_image(image)
+        sim = self.similarity(img)
         pos = point_selection(sim)
         if not self.fine_tune:
             points, labels = [pos, point_selection(sim, largest=False)], [1, 0]
             standard = (sim - sim.mean()) / torch.std(sim)
-            attn = F.interpolate(standard[None, None], size=feats.shape[-2:], mode="bilinear").sigmoid()
-            masks, scores, logits, _ = self.predict(feats, sizes, image, points, labels, multimask=False,
+            attn = F.interpolate(standard[None, None], size=img.feats.shape[-2:], mode="bilinear").sigmoid()
+            masks, scores, logits, _ = self.predict(img, points, labels, multimask=False,
                                                     attention_similarity=attn.unsqueeze(0).flatten(3),
                                                     target_embedding=self.target_embedding)
-            masks, scores, logits, _ = self.predict(feats, sizes, image, points, labels, mask_input=logits[0:1])
+            masks, scores, logits, _ = self.predict(img, points, labels, mask_input=logits[0:1])
         else:
             points, labels = [pos], [1]
-            _, _, logits, high = self.predict(feats, sizes, image, points, labels)
+            _, _, logits, high = self.predict(img, points, labels)
             mask = (high * self.weights[..., None]).sum(0) > 0
             logit = (logits * self.weights[..., None]).sum(0)
-            masks, scores, logits, _ = self.predict(feats, sizes, image, points, labels, box=self.box_of(mask),
+            masks, scores, logits, _ = self.predict(img, points, labels, box=self.box_of(mask),
                                                     mask_input=logit[None])
         best = int(scores.argmax())
-        masks, scores, logits, _ = self.predict(feats, sizes, image, points, labels, box=self.box_of(masks[best]),
+        masks, scores, logits, _ = self.predict(img, points, labels, box=self.box_of(masks[best]),
                                                 mask_input=logits[best:best + 1])
         return float(sim.max()), pos, masks[int(scores.argmax())]
 

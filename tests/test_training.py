@@ -25,7 +25,7 @@ from pin_match.data.writer import FrameSetWriter
 from pin_match.matchers.patch import alpha_to_grid
 from pin_match.nn.head import ProjectionHead, load_head
 from pin_match.scoring import RunOptions, score
-from pin_match.training import TrainConfig, TrainingError, store_frame_scores, train
+from pin_match.training import Backbone, TrainConfig, TrainingError, store_frame_scores, train
 
 FAST = dict(hidden=16, batch_crops=4, patience=100, threads=1)
 
@@ -33,7 +33,7 @@ FAST = dict(hidden=16, batch_crops=4, patience=100, threads=1)
 @pytest.fixture(scope="module")
 def head_dir(tiny_frameset, store, dino_cfg, tmp_path_factory):
     out = tmp_path_factory.mktemp("heads") / "tiny"
-    train(tiny_frameset, out, backbone="dino", overrides=dino_cfg, store=store, cfg=TrainConfig(epochs=3, **FAST),
+    train(tiny_frameset, out, backbone=Backbone("dino", dino_cfg), features=store, cfg=TrainConfig(epochs=3, **FAST),
           progress=False)
     return out
 
@@ -55,7 +55,7 @@ def _one_episode_frameset(root, split: str, same_category: bool):
 def test_a_frame_set_without_a_train_split_is_refused(tmp_path, capsys):
     fs = _one_episode_frameset(tmp_path / "valonly", "val", same_category=True)
     with pytest.raises(TrainingError, match=r"has no train split \(its episodes are in \['val'\]\)"):
-        train(fs, tmp_path / "head", backbone="dino")
+        train(fs, tmp_path / "head", backbone=Backbone("dino"))
     assert main(["train", str(fs.root), "--out", str(tmp_path / "h"), "--backbone", "dino"]) == 2
     assert "no train split" in capsys.readouterr().err
 
@@ -63,18 +63,18 @@ def test_a_frame_set_without_a_train_split_is_refused(tmp_path, capsys):
 def test_a_train_split_without_look_alikes_is_refused(tmp_path):
     fs = _one_episode_frameset(tmp_path / "nosame", "train", same_category=False)
     with pytest.raises(TrainingError, match="shows no same-category distractor in any frame"):
-        train(fs, tmp_path / "head", backbone="dino")
+        train(fs, tmp_path / "head", backbone=Backbone("dino"))
 
 
 def test_a_backbone_without_patch_features_is_refused(tiny_frameset, tmp_path):
     with pytest.raises(pin_match.errors.PinMatchError, match="matcher 'sift' has no patch features"):
-        train(tiny_frameset, tmp_path / "head", backbone="sift", features=tmp_path)
+        train(tiny_frameset, tmp_path / "head", backbone=Backbone("sift"), features=tmp_path)
 
 
 def test_a_store_of_another_frame_set_is_refused(store, tmp_path):
     other = _one_episode_frameset(tmp_path / "other", "train", same_category=True)
     with pytest.raises(TrainingError, match="was built for frame-set"):
-        train(other, tmp_path / "head", backbone="dino", store=store)
+        train(other, tmp_path / "head", backbone=Backbone("dino"), features=store)
 
 
 def test_an_untrained_head_is_the_frozen_matcher(store, tiny_frameset):
@@ -102,12 +102,12 @@ def test_checkpoint_provenance_and_learning(head_dir, store, tiny_frameset):
 
 def test_a_resumed_run_equals_an_uninterrupted_one(tiny_frameset, store, dino_cfg, tmp_path):
     cfg = TrainConfig(epochs=4, **FAST)
-    whole = train(tiny_frameset, tmp_path / "whole", backbone="dino", overrides=dino_cfg, store=store, cfg=cfg,
+    whole = train(tiny_frameset, tmp_path / "whole", backbone=Backbone("dino", dino_cfg), features=store, cfg=cfg,
                   progress=False)
-    part = train(tiny_frameset, tmp_path / "killed", backbone="dino", overrides=dino_cfg, store=store, cfg=cfg,
+    part = train(tiny_frameset, tmp_path / "killed", backbone=Backbone("dino", dino_cfg), features=store, cfg=cfg,
                  progress=False, stop_after=2)
     assert not part["finished"] and part["epochs_run"] == 2
-    resumed = train(tiny_frameset, tmp_path / "killed", backbone="dino", overrides=dino_cfg, store=store, cfg=cfg,
+    resumed = train(tiny_frameset, tmp_path / "killed", backbone=Backbone("dino", dino_cfg), features=store, cfg=cfg,
                     progress=False)
     assert resumed["finished"] and resumed["epochs_run"] == whole["epochs_run"] == 4
     a, b = load_file(str(tmp_path / "whole" / "state.safetensors")), load_file(str(tmp_path / "killed" /
@@ -119,7 +119,7 @@ def test_a_resumed_run_equals_an_uninterrupted_one(tiny_frameset, store, dino_cf
                                                                       "head.safetensors").read_bytes()
     assert [h["loss"] for h in whole["history"]] == [h["loss"] for h in resumed["history"]]
     with pytest.raises(TrainingError, match="holds a run of another configuration"):
-        train(tiny_frameset, tmp_path / "killed", backbone="dino", overrides=dino_cfg, store=store,
+        train(tiny_frameset, tmp_path / "killed", backbone=Backbone("dino", dino_cfg), features=store,
               cfg=TrainConfig(epochs=5, **{**FAST, "hidden": 8}), progress=False)
 
 

@@ -28,9 +28,10 @@ def _cmd_features(a: argparse.Namespace) -> None:
 
 
 def _cmd_train(a: argparse.Namespace) -> None:
-    from pin_match.training import TrainConfig, train
+    from pin_match.training import Backbone, TrainConfig, default_backbone, train
 
-    config = train(a.frameset, a.out, backbone=a.backbone, overrides=matcher_overrides(a), features=a.features,
+    backbone = Backbone(a.backbone or default_backbone(), matcher_overrides(a))
+    config = train(a.frameset, a.out, backbone=backbone, features=a.features,
                    cfg=dataclass_values(a, TrainConfig), progress=run_options(a).progress)
     best = config["history"][config["best_epoch"]]
     frozen = config["history"][0]

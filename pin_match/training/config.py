@@ -24,6 +24,17 @@ def _flag(default: Any, help_: str) -> Any:
     return field(default=default, metadata={"help": help_})
 
 
+@dataclass(frozen=True)
+class Backbone:
+    """The frozen patch matcher a head learns on: a registered name and its config overrides.
+
+    The head's config records both (``backbone``, ``backbone_cfg``): the learned matcher rebuilds it from them.
+    """
+
+    name: str = field(default_factory=default_backbone)
+    overrides: dict[str, Any] = field(default_factory=dict)
+
+
 @dataclass
 class TrainConfig:
     """Hyper-parameters; every field enters the run's identity (a resumed run must match them all)."""

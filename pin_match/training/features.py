@@ -134,6 +134,19 @@ def _crop_labels(mask: np.ndarray, legend: dict[int, int], grid: int) -> tuple[n
     return obj, cover
 
 
+@dataclass(frozen=True)
+class _Plan:
+    """What one store build encodes: the matcher, the frame-set and the split's part of it, its crops, the objects."""
+
+    matcher: Matcher
+    fs: FrameSet
+    part: FrameSet
+    split: str | None
+    policy: str
+    crops: pd.DataFrame
+    objects: list[str]
+
+
 def build_features(frameset: FrameSet | str | Path, backbone: str, *, overrides: dict[str, Any] | None = None,
                    out: str | Path = outputs.FEATURES, split: str | None = None, batch_size: int = 8,
                    progress: bool = True) -> FeatureStore:
@@ -150,15 +163,14 @@ def build_features(frameset: FrameSet | str | Path, backbone: str, *, overrides:
     part = fs.split(split)
     policy = getattr(matcher.cfg, "crops", "whole")
     frames = part.frames.sort_values(["episode_id", "step"]).reset_index(drop=True)
-    crops = _crop_table(frames, policy)
-    objects = sorted(fs.objects.object_id)
+    plan = _Plan(matcher, fs, part, split, policy, _crop_table(frames, policy), sorted(fs.objects.object_id))
     atomic.ensure_dir(root.parent)
     tmp = Path(tempfile.mkdtemp(prefix=f".{root.name}.", suffix=".tmp", dir=root.parent))
     try:
-        dim, t_refs = _encode_references(tmp, fs, matcher, objects, progress)
-        t_frames = _encode_frames(tmp, part, matcher, crops, objects, dim, batch_size, progress)
-        atomic.write_parquet(tmp / CROPS, crops)
-        meta = _store_meta(matcher, fs, split, policy, dim, objects, crops, t_refs, t_frames)
+        dim, t_refs = _encode_references(tmp, plan, progress)
+        t_frames = _encode_frames(tmp, plan, dim, batch_size, progress)
+        atomic.write_parquet(tmp / CROPS, plan.crops)
+        meta = _store_meta(plan, dim, t_refs, t_frames)
         atomic.write_text(tmp / META, json.dumps(json.loads(json.dumps(meta, default=str)), indent=2) + "\n")
         try:
             os.replace(tmp, root)
@@ -181,11 +193,11 @@ def _crop_table(frames: pd.DataFrame, policy: str) -> pd.DataFrame:
                                        "width", "height"])
 
 
-def _encode_references(tmp: Path, fs: FrameSet, matcher: Matcher, objects: list[str],
-                       progress: bool) -> tuple[int, float]:
+def _encode_references(tmp: Path, plan: _Plan, progress: bool) -> tuple[int, float]:
     """REF_TOKENS and REF_ALPHA for every object; returns the token width and the seconds taken."""
     from tqdm.auto import tqdm
 
+    fs, matcher, objects = plan.fs, plan.matcher, plan.objects
     enc, t0 = matcher.backbone, time.perf_counter()
     grid = int(enc.grid)
     probe = enc.encode([fs.target(objects[0]).views[0][..., :3]]).patches
@@ -204,11 +216,11 @@ def _encode_references(tmp: Path, fs: FrameSet, matcher: Matcher, objects: list[
     return dim, time.perf_counter() - t0
 
 
-def _encode_frames(tmp: Path, part: FrameSet, matcher: Matcher, crops: pd.DataFrame, objects: list[str], dim: int,
-                   batch_size: int, progress: bool) -> float:
+def _encode_frames(tmp: Path, plan: _Plan, dim: int, batch_size: int, progress: bool) -> float:
     """FRAME_TOKENS with each crop's per-patch ground truth (PATCH_OBJECT, PATCH_COVER); returns the seconds taken."""
     from tqdm.auto import tqdm
 
+    part, matcher, crops, objects = plan.part, plan.matcher, plan.crops, plan.objects
     enc, t0 = matcher.backbone, time.perf_counter()
     grid = int(enc.grid)
     obj_index = {o: i for i, o in enumerate(objects)}
@@ -239,15 +251,15 @@ def _encode_frames(tmp: Path, part: FrameSet, matcher: Matcher, crops: pd.DataFr
     return time.perf_counter() - t0
 
 
-def _store_meta(matcher: Matcher, fs: FrameSet, split: str | None, policy: str, dim: int, objects: list[str],
-                crops: pd.DataFrame, t_refs: float, t_frames: float) -> dict:
+def _store_meta(plan: _Plan, dim: int, t_refs: float, t_frames: float) -> dict:
     import pin_match
 
+    matcher, fs, crops = plan.matcher, plan.fs, plan.crops
     n_frames = crops.frame_id.nunique()
     return dict(version=STORE_VERSION, backbone=matcher.display_name, matcher_id=matcher.id,
                 config=matcher.cfg.hashed_dict(), frameset_fingerprint=fs.fingerprint, frameset_root=str(fs.root),
-                split=split or "all", crops_policy=policy, grid=int(matcher.backbone.grid), dim=dim,
-                input_size=int(getattr(matcher.backbone, "input_size", 0)), objects=objects, n_crops=len(crops),
+                split=plan.split or "all", crops_policy=plan.policy, grid=int(matcher.backbone.grid), dim=dim,
+                input_size=int(getattr(matcher.backbone, "input_size", 0)), objects=plan.objects, n_crops=len(crops),
                 n_frames=n_frames, seconds_references=round(t_refs, 2), seconds_frames=round(t_frames, 2),
                 frames_per_second=round(n_frames / max(t_frames, 1e-9), 3), pin_match_version=pin_match.__version__,
                 created=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
