@@ -41,11 +41,11 @@ def _time_references(n: int) -> float:
 
 
 def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:
-    from pin_match.data.synth import generate
+    from pin_match.data.synth import SynthSize, generate
 
     got: dict = {}
     with tempfile.TemporaryDirectory() as tmp:
-        seconds = once(lambda: got.update(fs=generate(Path(tmp) / "fs", workers=workers, **settings))).wall_s
+        seconds = once(lambda: got.update(fs=generate(Path(tmp) / "fs", SynthSize(**settings), workers=workers))).wall_s
         return seconds, got["fs"].fingerprint, len(got["fs"].frames)
 
 

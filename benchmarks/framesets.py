@@ -22,9 +22,9 @@ def cached(root: Path, build: Callable[[Path], FrameSet]) -> FrameSet:
 
 def synthetic(name: str, **settings) -> FrameSet:
     """A cached synthetic frame-set from ``pin-match generate``'s builder; ``settings`` are its keywords."""
-    from pin_match.data.synth import generate
+    from pin_match.data.synth import SynthSize, generate
 
-    return cached(CACHE / name, lambda root: generate(root, overwrite=True, **settings))
+    return cached(CACHE / name, lambda root: generate(root, SynthSize(**settings), overwrite=True))
 
 
 def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:

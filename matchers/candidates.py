@@ -33,10 +33,12 @@ def region_cells(scores: np.ndarray, row: int, col: int, drop: float) -> np.ndar
     return labels == labels[row, col]
 
 
-def shaped_box(x0: float, y0: float, x1: float, y1: float, aspect: float, pad: float, min_side: float,
-               width: int, height: int) -> tuple[int, int, int, int]:
-    """The box grown (never shrunk) to width / height = ``aspect``, padded by ``pad`` of its size per side, at
-    least ``min_side`` a side, shifted to fit the frame and clipped to it."""
+def shaped_box(box: tuple[float, float, float, float], aspect: float, pad: float, min_side: float,
+               frame_size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The box ``(x0, y0, x1, y1)`` grown (never shrunk) to width / height = ``aspect``, padded by ``pad`` of its
+    size per side, at least ``min_side`` a side, shifted to fit the frame ``(width, height)`` and clipped to it."""
+    x0, y0, x1, y1 = box
+    width, height = frame_size
     cx, cy = (x0 + x1) / 2, (y0 + y1) / 2
     w, h = max(x1 - x0, min_side), max(y1 - y0, min_side)
     if w / h < aspect:
@@ -72,9 +74,9 @@ def locate(maps: np.ndarray, crops: list[Crop], frame_shape: tuple[int, int], *,
             continue
         region = region_cells(maps[c], row, col, drop)
         rows, cols = np.nonzero(region)
-        box = shaped_box(crop.x0 + cols.min() * cell_w, crop.y0 + rows.min() * cell_h,
-                         crop.x0 + (cols.max() + 1) * cell_w, crop.y0 + (rows.max() + 1) * cell_h,
-                         aspect, pad, 2 * max(cell_w, cell_h), width, height)
+        extent = (crop.x0 + cols.min() * cell_w, crop.y0 + rows.min() * cell_h,
+                  crop.x0 + (cols.max() + 1) * cell_w, crop.y0 + (rows.max() + 1) * cell_h)
+        box = shaped_box(extent, aspect, pad, 2 * max(cell_w, cell_h), (width, height))
         points = np.stack([crop.x0 + (cols + 0.5) * cell_w, crop.y0 + (rows + 0.5) * cell_h], 1)
         points = np.minimum(np.rint(points), [width - 1, height - 1]).astype(np.float32)
         found.append(Candidate(box, float(maps[c, row, col]), points))

@@ -16,14 +16,14 @@ import pytest
 
 from conftest import make_view
 from pin_match import Target, create_matcher
-from pin_match.data.synth import DEFAULTS, generate
+from pin_match.data.synth import SynthSize, generate
 from pin_match.evaluation.labels import frame_labels, scored_frames
 from pin_match.scoring import RunOptions, score
 
 
 @pytest.fixture(scope="module")
 def ranking_set(tmp_path_factory):
-    return generate(tmp_path_factory.mktemp("synth_rank") / "frameset", workers=2, **DEFAULTS)
+    return generate(tmp_path_factory.mktemp("synth_rank") / "frameset", SynthSize(), workers=2)
 
 
 @pytest.mark.parametrize("name", ["sift", "color"])

@@ -293,10 +293,10 @@ def metrics_of(fs: FrameSet, out) -> dict:
 
 @pytest.fixture(scope="module")
 def synthetic(tmp_path_factory):
-    from pin_match.data.synth import generate
+    from pin_match.data.synth import SynthSize, generate
 
-    return generate(tmp_path_factory.mktemp("synth") / "fs", seed=1, episodes=2, objects_per_category=2,
-                    frames_per_episode=6, workers=1)
+    return generate(tmp_path_factory.mktemp("synth") / "fs",
+                    SynthSize(seed=1, episodes=2, objects_per_category=2, frames_per_episode=6), workers=1)
 
 
 @pytest.mark.parametrize("source_name", ["synthetic", "tiny_frameset"])

@@ -9,10 +9,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.data.synth import CATEGORIES, DEFAULTS, generate
+from pin_match.data.synth import CATEGORIES, SynthSize, generate
 from pin_match.data.synth.objects import make_objects
 
-SMALL = dict(seed=3, episodes=4, objects_per_category=4, frames_per_episode=8)
+SMALL = SynthSize(seed=3, episodes=4, objects_per_category=4, frames_per_episode=8)
 
 
 def tree_hash(root: Path) -> str:
@@ -26,11 +26,11 @@ def tree_hash(root: Path) -> str:
 
 @pytest.fixture(scope="module")
 def synth(tmp_path_factory):
-    return generate(tmp_path_factory.mktemp("synth") / "fs", workers=2, **SMALL)
+    return generate(tmp_path_factory.mktemp("synth") / "fs", SMALL, workers=2)
 
 
 def test_same_seed_same_bytes_whatever_the_workers(synth, tmp_path):
-    again = generate(tmp_path / synth.root.name, workers=1, **SMALL)  # same leaf: the name is in the manifest
+    again = generate(tmp_path / synth.root.name, SMALL, workers=1)  # same leaf: the name is in the manifest
     assert tree_hash(again.root) == tree_hash(synth.root)
     assert again.fingerprint == synth.fingerprint
 
@@ -115,8 +115,8 @@ def test_visibility_agrees_with_masks(synth):
 def test_frames_shape_and_roles(synth):
     assert set(zip(synth.frames.height, synth.frames.width)) == {(640, 360)}
     per_episode = synth.frames.groupby("episode_id").size()
-    assert len(per_episode) == SMALL["episodes"]
-    assert (per_episode >= SMALL["frames_per_episode"]).all()  # the approach runs to its end: longer, never shorter
+    assert len(per_episode) == SMALL.episodes
+    assert (per_episode >= SMALL.frames_per_episode).all()  # the approach runs to its end: longer, never shorter
     roles = set(synth.visibility.role)
     assert "target" in roles and "other" in roles
 
@@ -155,7 +155,7 @@ def test_default_set_targets_large_and_alike_in_both_splits(tmp_path):
     from pin_match.evaluation.frameset_page import LARGE_PX, target_sizes
     from pin_match.evaluation.labels import frame_labels
 
-    sizes = target_sizes(frame_labels(generate(tmp_path / "fs", workers=2, **DEFAULTS)))
+    sizes = target_sizes(frame_labels(generate(tmp_path / "fs", SynthSize(), workers=2)))
     assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}
     large = sizes["episodes with 3 such frames"]
     assert large["val"] == sizes.episodes["val"], sizes.to_dict()
@@ -176,7 +176,7 @@ def test_refuses_existing_output(synth):
     from pin_match.data.frameset import FrameSetError
 
     with pytest.raises(FrameSetError, match="already exists"):
-        generate(synth.root, **SMALL)
+        generate(synth.root, SMALL)
 
 
 # ---------------------------------------------------------------- placement never fails (issue 14.1)
@@ -204,7 +204,8 @@ def test_every_room_takes_twelve_large_objects(seed):
 @pytest.mark.slow
 def test_seed_whose_surfaces_overflow_still_builds(tmp_path):
     """Seed 11 at this size used to stop with 'no free surface for an object of radius ...'."""
-    fs = generate(tmp_path / "fs", seed=11, episodes=24, objects_per_category=2, frames_per_episode=1, workers=1)
+    size = SynthSize(seed=11, episodes=24, objects_per_category=2, frames_per_episode=1)
+    fs = generate(tmp_path / "fs", size, workers=1)
     assert len(fs.episodes) == 24 and len(fs.frames) == 24
 
 

@@ -43,11 +43,11 @@ def test_region_is_the_connected_cells_near_the_peak():
 
 def test_shaped_box_grows_to_the_aspect_pads_and_stays_in_the_frame():
     # a 20 x 20 region, aspect 0.5 (tall): 20 x 40, padded by 25 % a side: 30 x 60, centred on (110, 110)
-    assert shaped_box(100, 100, 120, 120, 0.5, 0.25, 10, 360, 640) == (95, 80, 125, 140)
+    assert shaped_box((100, 100, 120, 120), 0.5, 0.25, 10, (360, 640)) == (95, 80, 125, 140)
     # at the frame's corner the box is shifted in, not cut
-    assert shaped_box(0, 0, 20, 20, 1.0, 0.0, 40, 360, 640) == (0, 0, 40, 40)
+    assert shaped_box((0, 0, 20, 20), 1.0, 0.0, 40, (360, 640)) == (0, 0, 40, 40)
     # never larger than the frame
-    assert shaped_box(0, 0, 360, 600, 2.0, 0.5, 10, 360, 640) == (0, 0, 360, 640)
+    assert shaped_box((0, 0, 360, 600), 2.0, 0.5, 10, (360, 640)) == (0, 0, 360, 640)
 
 
 def test_locate_orders_peaks_and_merges_cells_of_an_earlier_box():

@@ -36,12 +36,11 @@ that use it (an object used by train and val episodes is an error).
 
 
 def _cmd_synth(a: argparse.Namespace) -> None:
-    from pin_match.data.synth import generate
+    from pin_match.data.synth import SynthSize, generate
 
-    kwargs = {k: v for k, v in dict(seed=a.seed, episodes=a.episodes, objects_per_category=a.objects_per_category,
-                                    frames_per_episode=a.frames_per_episode, workers=a.workers).items()
-              if v is not None}
-    fs = generate(a.out, overwrite=a.overwrite, progress=run_options(a).progress, **kwargs)
+    size = SynthSize(**{k: v for k, v in dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
+                                              objects_per_category=a.objects_per_category).items() if v is not None})
+    fs = generate(a.out, size, workers=a.workers, overwrite=a.overwrite, progress=run_options(a).progress)
     print(f"wrote {fs}")
 
 

@@ -32,10 +32,10 @@ SYNTHETIC_OBJECTS_PER_CATEGORY = 4
 
 def synthetic(out: Path, seed: int, run: RunOptions) -> FrameSet:
     """A small synthetic set (``SYNTHETIC_EPISODES`` episodes) of the default generator."""
-    from pin_match.data.synth import generate  # pybullet loads only when the set is rendered
+    from pin_match.data.synth import SynthSize, generate  # pybullet loads only when the set is rendered
 
-    return generate(out, seed=seed, episodes=SYNTHETIC_EPISODES,
-                    objects_per_category=SYNTHETIC_OBJECTS_PER_CATEGORY, workers=run.workers, progress=run.progress)
+    size = SynthSize(seed=seed, episodes=SYNTHETIC_EPISODES, objects_per_category=SYNTHETIC_OBJECTS_PER_CATEGORY)
+    return generate(out, size, workers=run.workers, progress=run.progress)
 
 
 def lookalikes(out: Path, seed: int, run: RunOptions) -> FrameSet:

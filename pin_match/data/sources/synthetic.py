@@ -14,9 +14,9 @@ from pin_match.data.sources.catalogue import DataSource, register
 
 
 def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:
-    from pin_match.data.synth import generate  # pybullet loads only when a synthetic set is asked for
+    from pin_match.data.synth import SynthSize, generate  # pybullet loads only when a synthetic set is asked for
 
-    return generate(out, seed=seed, overwrite=overwrite)
+    return generate(out, SynthSize(seed=seed), overwrite=overwrite)
 
 
 SOURCE = register(DataSource(

@@ -3,7 +3,7 @@
 See docs/synthetic.md for what is modelled and why this renderer.
 """
 
-from pin_match.data.synth.generate import DEFAULTS, generate
+from pin_match.data.synth.generate import SynthSize, generate
 from pin_match.data.synth.objects import CATEGORIES, SynthError
 
-__all__ = ["CATEGORIES", "DEFAULTS", "SynthError", "generate"]
+__all__ = ["CATEGORIES", "SynthError", "SynthSize", "generate"]

@@ -26,8 +26,17 @@ from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk
 from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-DEFAULTS = dict(seed=0, episodes=24, objects_per_category=10, frames_per_episode=48)
 GENERATOR_VERSION = 2
+
+
+@dataclass(frozen=True)
+class SynthSize:
+    """How much a synthetic set holds; the seed draws everything else. The defaults are the embedded default set."""
+
+    seed: int = 0
+    episodes: int = 24
+    objects_per_category: int = 10
+    frames_per_episode: int = 48
 
 
 @dataclass(frozen=True)
@@ -174,9 +183,7 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
 
 
 # ------------------------------------------------------------------ entry point
-def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = DEFAULTS["episodes"],
-             objects_per_category: int = DEFAULTS["objects_per_category"], workers: int | None = None,
-             frames_per_episode: int = DEFAULTS["frames_per_episode"], overwrite: bool = False,
+def generate(out: str | Path, size: SynthSize = SynthSize(), *, workers: int | None = None, overwrite: bool = False,
              progress: bool = False) -> FrameSet:
     """Write a complete synthetic PIN-like frame-set to ``out`` and return it loaded.
 
@@ -185,13 +192,14 @@ def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = D
     """
     from tqdm import tqdm
 
-    if episodes < 2:
-        raise SynthError(f"episodes must be at least 2 (one train, one val), got {episodes}")
-    if frames_per_episode < 1:
-        raise SynthError(f"frames_per_episode must be positive, got {frames_per_episode}")
-    specs = make_objects(seed, objects_per_category)
-    provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=episodes,
-                      objects_per_category=objects_per_category, frames_per_episode=frames_per_episode,
+    seed = size.seed
+    if size.episodes < 2:
+        raise SynthError(f"episodes must be at least 2 (one train, one val), got {size.episodes}")
+    if size.frames_per_episode < 1:
+        raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
+    specs = make_objects(seed, size.objects_per_category)
+    provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
+                      objects_per_category=size.objects_per_category, frames_per_episode=size.frames_per_episode,
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance)
@@ -205,12 +213,12 @@ def generate(out: str | Path, *, seed: int = DEFAULTS["seed"], episodes: int = D
             for spec, views in zip(specs, rendered):
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions))
             plans = []
-            for episode_id, split, scene_id, objs in plan_episodes(specs, seed, episodes):
+            for episode_id, split, scene_id, objs in plan_episodes(specs, seed, size.episodes):
                 writer.add_episode(episode_id, split, scene_id, objs[0].object_id, [o.object_id for o in objs[1:]])
                 roles = writer.roles(episode_id)
                 plans.append(EpisodePlan(episode_id, split, scene_id, stable_seed(seed, "scene", scene_id),
                                          stable_seed(seed, "episode", episode_id),
-                                         tuple(objs), tuple(roles[o.object_id] for o in objs), frames_per_episode,
+                                         tuple(objs), tuple(roles[o.object_id] for o in objs), size.frames_per_episode,
                                          str(writer.staging)))
             for records in tqdm(imap(render_episode, plans), total=len(plans), desc="render episodes",
                                 unit="episode", disable=not progress, dynamic_ncols=True):
