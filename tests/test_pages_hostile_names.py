@@ -48,7 +48,6 @@ class ToyMatcher(CropMatcher):
         return [MatchResult(score=self.crop_score(c), points=[[c.shape[1] / 2, c.shape[0] / 2]]) for c in crops]
 
 
-@register_matcher(MATCHER_A)
 class RedMatcher(ToyMatcher):
     """The share of the crop's pixels that are red (the colour of no val target)."""
 
@@ -59,7 +58,6 @@ class RedMatcher(ToyMatcher):
         return float(((crop[..., 0] > 150) & (crop[..., 2] < 100)).mean())
 
 
-@register_matcher(MATCHER_B)
 class BrightMatcher(ToyMatcher):
     """The crop's mean brightness in [0, 1]."""
 
@@ -68,6 +66,18 @@ class BrightMatcher(ToyMatcher):
     @staticmethod
     def crop_score(crop: np.ndarray) -> float:
         return float(crop.mean() / 255.0)
+
+
+@pytest.fixture(scope="module")
+def hostile_matchers():
+    """Both toys registered for this module only: other tests list the registry and expect no such names."""
+    from pin_match.contract import registry
+
+    for name, cls in ((MATCHER_A, RedMatcher), (MATCHER_B, BrightMatcher)):
+        register_matcher(name)(cls)
+    yield
+    for name in (MATCHER_A, MATCHER_B):
+        registry._REGISTRY.pop(name)
 
 
 @pytest.fixture(scope="module")
@@ -130,7 +140,7 @@ def check_page(path: Path, names: list[str]) -> Page:
 
 
 @pytest.fixture(scope="module")
-def pages(hostile_frameset, tmp_path_factory):
+def pages(hostile_matchers, hostile_frameset, tmp_path_factory):
     """bench (tuned on train) + compare + index, and inspect, all written for the hostile set."""
     from pin_match.evaluation.bench import bench
     from pin_match.evaluation.compare import compare_bench
