@@ -115,13 +115,12 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     from dataclasses import replace
 
     from pin_match.evaluation.bench import Stopwatch
-    from pin_match.evaluation.demo import DEMO_SETS, demo
+    from pin_match.evaluation.demo import DEMO_SETS, LOOKALIKES, SYNTHETIC, demo
     from pin_match.evaluation.tables import markdown_table
 
-    first, *rest = DEMO_SETS
-    sets = [replace(first, matchers=tuple(a.matcher or first.matchers))]
-    if not a.no_lookalikes:
-        sets += [replace(s, matchers=tuple(a.lookalike_matcher or s.matchers)) for s in rest]
+    picked = {SYNTHETIC.name: a.matcher, LOOKALIKES.name: a.lookalike_matcher}
+    sets = [replace(s, matchers=tuple(picked[s.name] or s.matchers)) for s in DEMO_SETS
+            if not (a.no_lookalikes and s is LOOKALIKES)]
     watch = Stopwatch()
     results = demo(a.out, sets, seed=a.seed, run=run_options(a), watch=watch)
     for r in results:
@@ -143,7 +142,7 @@ def _table_arguments(s: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.demo import DEMO_OUT, DEMO_SETS
+    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SYNTHETIC
     from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
     objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
@@ -194,7 +193,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_bench)
 
-    synthetic, real = DEMO_SETS[0], DEMO_SETS[1]
+    synthetic, real = SYNTHETIC, LOOKALIKES
     s = sub.add_parser("demo", help="the whole job on a synthetic and a real look-alike frame-set (built if absent)")
     s.add_argument("--matcher", action="append",
                    help=f"matcher for the {synthetic.name} set (repeatable; default {', '.join(synthetic.matchers)})")
