@@ -110,6 +110,14 @@ def shipped_pasted(tmp_path_factory):
     return build(tmp_path_factory.mktemp("lookalikes") / "pasted", variant="pasted")
 
 
+@pytest.fixture(scope="session")
+def default_synth(tmp_path_factory):
+    """The default synthetic set of ``pin-match synth`` (1,286 frames): rendered once per session."""
+    from pin_match.data.synth import SynthSize, generate
+
+    return generate(tmp_path_factory.mktemp("synth_default") / "frameset", SynthSize(), workers=2)
+
+
 @pytest.fixture(scope="module")
 def dino_cfg(tmp_path_factory):
     """The tiny timm ViT at 64 px: a 4 x 4 patch grid of 64-dim tokens (feature store and training tests)."""

@@ -150,12 +150,12 @@ def test_every_episode_stops_with_its_target_large_and_passes_a_lookalike(synth)
 
 
 @pytest.mark.slow
-def test_default_set_targets_large_and_alike_in_both_splits(tmp_path):
+def test_default_set_targets_large_and_alike_in_both_splits(default_synth):
     """The default set: every val episode shows its target at 2,000 px in 3 frames; the splits' medians within 2x."""
     from pin_match.evaluation.frameset_page import LARGE_PX, target_sizes
     from pin_match.evaluation.labels import frame_labels
 
-    sizes = target_sizes(frame_labels(generate(tmp_path / "fs", SynthSize(), workers=2)))
+    sizes = target_sizes(frame_labels(default_synth))
     assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}
     large = sizes["episodes with 3 such frames"]
     assert large["val"] == sizes.episodes["val"], sizes.to_dict()
