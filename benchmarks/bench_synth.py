@@ -20,8 +20,9 @@ def _time_frames(n: int) -> float:
     from pin_match.data.compose import stable_seed
     from pin_match.data.synth.generate import EpisodePlan, plan_episodes, render_episode
     from pin_match.data.synth.objects import make_objects
+    from pin_match.data.synth.scans import ScanFolder
 
-    specs = make_objects(0, 4)
+    specs = make_objects(ScanFolder.open(), 4)
     episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]
     roles = ("target",) + tuple("same_category" if o.category == objs[0].category else "other" for o in objs[1:])
     with tempfile.TemporaryDirectory() as tmp:
@@ -34,8 +35,9 @@ def _time_frames(n: int) -> float:
 def _time_references(n: int) -> float:
     from pin_match.data.synth.generate import render_object
     from pin_match.data.synth.objects import make_objects
+    from pin_match.data.synth.scans import ScanFolder
 
-    specs = make_objects(0, 2)[::2][:n]
+    specs = make_objects(ScanFolder.open(), 2)[::2][:n]
     render_object(specs[0])
     return once(lambda: [render_object(s) for s in specs]).wall_s / len(specs)
 
@@ -51,8 +53,8 @@ def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:
 
 def run(quick: bool) -> dict:
     """Measure and print; returns the numbers (seconds, frames/s) for a common runner."""
-    settings = (dict(episodes=4, objects_per_category=4, frames_per_episode=8) if quick
-                else dict(episodes=8, objects_per_category=4, frames_per_episode=32))
+    settings = (dict(episodes=4, objects_per_family=4, frames_per_episode=8) if quick
+                else dict(episodes=8, objects_per_family=4, frames_per_episode=32))
     per_frame = _time_frames(8 if quick else 32)
     per_object = _time_references(4 if quick else 12)
     t1, fp1, n_frames = _time_generate(1, settings)

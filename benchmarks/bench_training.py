@@ -21,8 +21,8 @@ from benchmarks.framesets import CACHE, real_photos, synthetic
 from benchmarks.timing import once
 
 # the training frame-set: twice the demo's episodes, so the train split has 24 episodes (768 frames)
-SYNTH = dict(seed=0, episodes=48, objects_per_category=10, frames_per_episode=32)
-QUICK = dict(seed=1, episodes=4, objects_per_category=4, frames_per_episode=8)
+SYNTH = dict(seed=0, episodes=48, objects_per_family=10, frames_per_episode=32)
+QUICK = dict(seed=1, episodes=4, objects_per_family=4, frames_per_episode=8)
 THREADS = 1  # one torch thread: on a shared 2-core machine two threads oversubscribe and run ~3x slower
 # effnet at 320 px (half the extraction cost of its default 448) and layer blocks.4 (112 channels, stride 16, a
 # 20 x 20 grid): with its default blocks.6 (stride 32) a head did not generalise to held-out objects (docs/training.md)

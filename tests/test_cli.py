@@ -65,7 +65,7 @@ def test_import_help_documents_the_recording(capsys):
 def test_overwrite_message_names_the_flag(tmp_path, capsys):
     """Issue 14.8."""
     (tmp_path / "fs").mkdir()
-    rc, _, err = _run(capsys, "synth", tmp_path / "fs", "--episodes", "2", "--objects-per-category", "2")
+    rc, _, err = _run(capsys, "synth", tmp_path / "fs", "--episodes", "2", "--objects-per-family", "2")
     assert rc == 2 and "already exists: pass --overwrite" in err
 
 

@@ -13,7 +13,7 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
     missing = f"{tmp}/missing"
     return [
         ["synth", f"{tmp}/s1", "--episodes", "1"],
-        ["synth", f"{tmp}/s2", "--objects-per-category", "1"],
+        ["synth", f"{tmp}/s2", "--objects-per-family", "1"],
         ["synth", f"{tmp}/s3", "--frames-per-episode", "0"],
         ["import", missing, "--objects", missing, "--out", f"{tmp}/imported"],
         ["data", "build", "recolour", fs],  # an existing frame-set, without --overwrite
@@ -24,6 +24,7 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["data", "prepare", "core50", missing, missing, "--out", f"{tmp}/src"],
         ["data", "prepare", "core50", missing, "--out", f"{tmp}/src"],  # two inputs needed
         ["data", "prepare", "synthetic", missing, "--out", f"{tmp}/src"],
+        ["data", "prepare", "gso", missing, "--out", f"{tmp}/src"],  # not a checkout of the scans' repository
         ["score", missing, "--matcher", "color"],
         ["score", fs, "--matcher", "no-such-matcher"],
         ["score", fs, "--matcher", "color", "--shard", "3/3"],

@@ -30,7 +30,7 @@ def _registering_modules() -> set[str]:
 
 def test_every_source_module_is_registered_by_importing_the_package():
     assert _registering_modules() == {m.__name__.rsplit(".", 1)[1] for m in sources.BUILT_IN}
-    assert names() == ["core50", "grocery", "myvlm", "recolour", "synthetic", "twins"]
+    assert names() == ["core50", "grocery", "gso", "myvlm", "recolour", "synthetic", "twins"]
     for name in names():
         s = get(name)
         assert s.name == name and s.licence and s.variants
@@ -51,6 +51,8 @@ def test_requests_a_source_cannot_serve_fail_before_anything_is_written(tmp_path
         get("core50").build(tmp_path / "a", "drawn")
     with pytest.raises(DataSourceError, match="pin-match data prepare myvlm MYVLM_REPO --out SRC"):
         get("myvlm").build(tmp_path / "a")
+    with pytest.raises(DataSourceError, match="pin-match data prepare gso CHECKOUT --out SRC"):
+        get("gso").build(tmp_path / "a")
     with pytest.raises(DataSourceError, match="reads no source folder"):
         get("recolour").build(tmp_path / "a", src=tmp_path)
     with pytest.raises(DataSourceError, match=r"reads 2 input\(s\) \(CORE50_REPO ROOMS_REPO\), got 1"):

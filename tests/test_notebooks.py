@@ -28,7 +28,7 @@ MATCHERS = ["sift", "color"]
 def bench_run(tmp_path_factory):
     """A demo-shaped folder: run/frameset (synthetic) plus bench's scores, thresholds and reports."""
     run = tmp_path_factory.mktemp("nb") / "run"
-    size = SynthSize(seed=1, episodes=4, objects_per_category=4, frames_per_episode=8)
+    size = SynthSize(seed=1, episodes=4, objects_per_family=4, frames_per_episode=8)
     fs = generate(run / "frameset", size, workers=1)
     bench(EvalContext(fs, Bootstrap(n_boot=50)), MATCHERS, run, run=RunOptions(workers=1, progress=False))
     return run
@@ -59,7 +59,7 @@ def test_load_bench(bench_run):
 def test_load_bench_errors(bench_run, tmp_path):
     with pytest.raises(AnalysisError, match="no reports"):
         load_bench(tmp_path, bench_run / "frameset")
-    other = generate(tmp_path / "other", SynthSize(seed=2, episodes=2, objects_per_category=2, frames_per_episode=2),
+    other = generate(tmp_path / "other", SynthSize(seed=2, episodes=2, objects_per_family=2, frames_per_episode=2),
                      workers=1)
     with pytest.raises(AnalysisError, match="reports frame-set"):
         load_bench(bench_run, other)

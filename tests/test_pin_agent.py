@@ -296,7 +296,7 @@ def synthetic(tmp_path_factory):
     from pin_match.data.synth import SynthSize, generate
 
     return generate(tmp_path_factory.mktemp("synth") / "fs",
-                    SynthSize(seed=1, episodes=2, objects_per_category=2, frames_per_episode=6), workers=1)
+                    SynthSize(seed=1, episodes=2, objects_per_family=2, frames_per_episode=6), workers=1)
 
 
 @pytest.mark.parametrize("source_name", ["synthetic", "tiny_frameset"])

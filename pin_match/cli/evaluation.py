@@ -115,10 +115,10 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     from dataclasses import replace
 
     from pin_match.evaluation.bench import Stopwatch
-    from pin_match.evaluation.demo import DEMO_SETS, LOOKALIKES, SYNTHETIC, demo
+    from pin_match.evaluation.demo import DEMO_SETS, LOOKALIKES, SCANNED, demo
     from pin_match.evaluation.tables import markdown_table
 
-    picked = {SYNTHETIC.name: a.matcher, LOOKALIKES.name: a.lookalike_matcher}
+    picked = {SCANNED.name: a.matcher, LOOKALIKES.name: a.lookalike_matcher}
     sets = [replace(s, matchers=tuple(picked[s.name] or s.matchers)) for s in DEMO_SETS
             if not (a.no_lookalikes and s is LOOKALIKES)]
     watch = Stopwatch()
@@ -142,7 +142,7 @@ def _table_arguments(s: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SYNTHETIC
+    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SCANNED
     from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
     objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
@@ -193,14 +193,16 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_bench)
 
-    synthetic, real = SYNTHETIC, LOOKALIKES
-    s = sub.add_parser("demo", help="the whole job on a synthetic and a real look-alike frame-set (built if absent)")
+    scanned, real = SCANNED, LOOKALIKES
+    s = sub.add_parser("demo", help="the whole job on scanned look-alikes rendered along PIN walks and on real "
+                                    "look-alike photos (built if absent)")
     s.add_argument("--matcher", action="append",
-                   help=f"matcher for the {synthetic.name} set (repeatable; default {', '.join(synthetic.matchers)})")
+                   help=f"matcher for the {scanned.name} set (repeatable; default {', '.join(scanned.matchers)})")
     s.add_argument("--lookalike-matcher", action="append",
                    help=f"matcher for the {real.name} set (repeatable; default {', '.join(real.matchers)})")
-    s.add_argument("--no-lookalikes", action="store_true", help=f"the {synthetic.name} set only")
+    s.add_argument("--no-lookalikes", action="store_true", help=f"the {scanned.name} set only")
     s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
-    s.add_argument("--seed", type=int, default=0, help="generator seed of the synthetic frame-set (default 0)")
+    s.add_argument("--seed", type=int, default=0,
+                   help="seed of the demo's frame-sets (default 0); a set built with another is built again")
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_demo)

@@ -16,6 +16,7 @@ from pathlib import Path
 from pin_match import outputs
 from pin_match.cli import catalog, data, evaluation, fitting, pages, training
 from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
+from pin_match.data.synth import SynthSize
 from pin_match.errors import PinMatchError
 
 IMPORT_HELP = """Build a frame-set from a PIN recording and the PInNED objects folder.
@@ -36,11 +37,12 @@ that use it (an object used by train and val episodes is an error).
 
 
 def _cmd_synth(a: argparse.Namespace) -> None:
-    from pin_match.data.synth import SynthSize, generate
+    from pin_match.data.synth import generate
 
     size = SynthSize(**{k: v for k, v in dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
-                                              objects_per_category=a.objects_per_category).items() if v is not None})
-    fs = generate(a.out, size, workers=a.workers, overwrite=a.overwrite, progress=run_options(a).progress)
+                                              objects_per_family=a.objects_per_family).items() if v is not None})
+    fs = generate(a.out, size, scans=a.scans, workers=a.workers, overwrite=a.overwrite,
+                  progress=run_options(a).progress)
     print(f"wrote {fs}")
 
 
@@ -84,10 +86,15 @@ def build_parser() -> argparse.ArgumentParser:
     s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set of chosen sizes (docs/synthetic.md; "
                                      "every other source: `pin-match data`)")
     s.add_argument("out", type=Path, help="frame-set folder to create")
-    s.add_argument("--seed", type=int, help="generator seed (default 0); same seed and sizes, same bytes")
-    s.add_argument("--episodes", type=int, help="episodes, half train and half val (default 24)")
-    s.add_argument("--objects-per-category", type=int, help="object instances per category (default 10)")
-    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode (default 32)")
+    default = SynthSize()
+    s.add_argument("--seed", type=int, help=f"generator seed (default {default.seed}); same seed and sizes, same bytes")
+    s.add_argument("--episodes", type=int, help=f"episodes, half train and half val (default {default.episodes})")
+    s.add_argument("--objects-per-family", type=int, help="at most this many instances of a look-alike family in "
+                                                          f"each split (default {default.objects_per_family})")
+    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode, longer where the approach "
+                                                          f"needs it (default {default.frames_per_episode})")
+    s.add_argument("--scans", type=Path, help="a scan folder from `pin-match data prepare gso` (default: the scans "
+                                              "shipped with pin_match); its families.csv names the families")
     add_run_options(s, workers="rendering processes (default: all cores); output is the same", batch_size=False)
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_synth)

@@ -150,6 +150,17 @@ def visibility_rows(frame_id: str, mask: np.ndarray, legend: Mapping[int, tuple[
     return rows
 
 
+OBJECT_COLUMNS = ("object_id", "category", "split", "source", "licence")
+
+
+@dataclass(frozen=True)
+class ObjectOrigin:
+    """Where an instance comes from (a scan, a photo) and under which licence: the objects table's last columns."""
+
+    source: str = ""
+    licence: str = ""
+
+
 class FrameSetWriter:
     """Collects objects, episodes and frames, then publishes the frame-set atomically."""
 
@@ -174,7 +185,9 @@ class FrameSetWriter:
         self._visibility: list[dict] = []
 
     def add_object(self, object_id: str, category: str, split: str, views: Sequence[np.ndarray],
-                   descriptions: Sequence[str]) -> None:
+                   descriptions: Sequence[str], *, origin: ObjectOrigin | None = None) -> None:
+        """Add an instance with its 3 RGBA reference views and 3 descriptions; ``origin`` fills the objects
+        table's ``source`` and ``licence`` columns (where the instance comes from, under which licence)."""
         check_id("object", object_id)
         if object_id in self._objects:
             raise FrameSetError(f"object id {object_id!r} added twice")
@@ -187,7 +200,9 @@ class FrameSetWriter:
             if view.ndim != 3 or view.shape[2] != 4:
                 raise FrameSetError(f"object {object_id!r}: view {k} must be RGBA")
             atomic.write_image(self.staging / OBJECT_IMAGES / object_id / f"{object_id}_{k}.png", view)
-        self._objects[object_id] = dict(object_id=object_id, category=category, split=split)
+        origin = origin or ObjectOrigin()
+        self._objects[object_id] = dict(object_id=object_id, category=category, split=split, source=origin.source,
+                                        licence=origin.licence)
         self._descriptions[object_id] = list(descriptions)
 
     def add_episode(self, episode_id: str, split: str, scene_id: str, target_object_id: str,
@@ -234,7 +249,9 @@ class FrameSetWriter:
     def close(self) -> FrameSet:
         """Write the tables and manifest, move the frame-set into place and load it back."""
         s = self.staging
-        objects = pd.DataFrame(list(self._objects.values()), columns=["object_id", "category", "split"])
+        objects = pd.DataFrame(list(self._objects.values()), columns=OBJECT_COLUMNS)
+        if not (objects.source.astype(bool) | objects.licence.astype(bool)).any():
+            objects = objects[list(OBJECT_COLUMNS[:3])]
         atomic.write_text(s / OBJECTS, objects.to_csv(index=False))
         atomic.write_json(s / DESCRIPTIONS, self._descriptions)
         atomic.write_json(s / EPISODES, {"episodes": list(self._episodes.values())})

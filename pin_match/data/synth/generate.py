@@ -17,26 +17,17 @@ import numpy as np
 
 from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.frameset import FrameSet
-from pin_match.data.synth.builders import build
-from pin_match.data.synth.objects import CATEGORIES, ObjectSpec, SynthError, make_objects
+from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
+from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
 from pin_match.data.synth.scene import make_room, place_objects
 from pin_match.data.synth.shapes import Mesh
+from pin_match.data.synth.size import DEFAULT_SIZE, SynthSize
 from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk
-from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, encode_frame
+from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 2
-
-
-@dataclass(frozen=True)
-class SynthSize:
-    """How much a synthetic set holds; the seed draws everything else. The defaults are the embedded default set."""
-
-    seed: int = 0
-    episodes: int = 24
-    objects_per_category: int = 10
-    frames_per_episode: int = 48
+GENERATOR_VERSION = 3
 
 
 @dataclass(frozen=True)
@@ -57,16 +48,20 @@ class EpisodePlan:
 def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tuple[str, str, str, list[ObjectSpec]]]:
     """(episode id, split, scene id, [target, distractors...]) per episode; half train, half val.
 
-    Targets cycle through a shuffled category order so a split's episodes cover the
-    categories evenly; same-category distractors are up to 3 siblings (3 most of the time,
-    as PIN's 2.90 average), other-category distractors 5 to 10.
+    Targets cycle through a shuffled order of the split's families that have a look-alike in it
+    (two members or more), so a split's episodes cover the families evenly; same-category
+    distractors are up to 3 siblings (3 most of the time, as PIN's 2.90 average), other-category
+    distractors 5 to 10 instances of other families.
     """
     out = []
     n_val = episodes // 2
     for split, count in (("train", episodes - n_val), ("val", n_val)):
         pool = [s for s in specs if s.split == split]
+        families = sorted({s.category for s in pool if sum(o.category == s.category for o in pool) > 1})
+        if not families:
+            raise SynthError(f"no family has two {split} instances: an episode needs a target and a look-alike")
         rng = np.random.default_rng(stable_seed(seed, "episodes", split))
-        order = [CATEGORIES[k] for k in rng.permutation(len(CATEGORIES))]
+        order = [families[k] for k in rng.permutation(len(families))]
         n_scenes = max(1, (count + 1) // 2)
         for i in range(count):
             category = order[i % len(order)]
@@ -78,7 +73,7 @@ def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tup
                 k = int(rng.integers(1, k + 1))
             others = [s for s in pool if s.category != category]
             n_other = min(len(others), int(rng.integers(5, 11)))
-            chosen = [siblings[j] for j in sorted(rng.choice(len(siblings), k, replace=False))] if k else []
+            chosen = [siblings[j] for j in sorted(rng.choice(len(siblings), k, replace=False))]
             chosen += [others[j] for j in sorted(rng.choice(len(others), n_other, replace=False))]
             out.append((f"{split}_{i:03d}", split, f"{split}_scene_{i % n_scenes:02d}", [target, *chosen]))
     return out
@@ -96,18 +91,24 @@ def _renderer() -> Renderer:
 
 
 def render_object(spec: ObjectSpec) -> list[np.ndarray]:
-    mesh, atlas = build(spec)
-    return reference_views(_renderer(), mesh, atlas)
+    scan = spec.load()
+    return reference_views(_renderer(), scan.mesh, scan.texture)
 
 
 def episode_light(rng: np.random.Generator) -> Light:
-    """Direction, colour temperature and ambient/diffuse balance vary per episode."""
+    """Direction, colour temperature and ambient/diffuse balance vary per episode.
+
+    Indoor light is mostly diffuse (PIN's scanned houses carry it baked in): ambient stays at 0.6
+    or more, so a face turned from the single light keeps most of its colour. With ambient down to
+    0.4 (generator version 2) a scanned box's front could render near black beside its bright
+    reference views.
+    """
     warm = rng.uniform(-1, 1)
     colour = (1.0, 1.0 - 0.06 * abs(warm) * (warm > 0), 1.0 - 0.12 * warm) if warm > 0 else (1.0 + 0.1 * warm, 1.0,
                                                                                                 1.0)
     return Light(direction=(float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1)), float(rng.uniform(0.6, 2.0))),
-                 colour=tuple(float(c) for c in colour), ambient=float(rng.uniform(0.4, 0.65)),
-                 diffuse=float(rng.uniform(0.3, 0.6)), specular=float(rng.uniform(0.02, 0.2)))
+                 colour=tuple(float(c) for c in colour), ambient=float(rng.uniform(0.6, 0.75)),
+                 diffuse=float(rng.uniform(0.25, 0.4)), specular=float(rng.uniform(0.02, 0.1)))
 
 
 def _camera_look(image: np.ndarray, gain: float, rng: np.random.Generator) -> np.ndarray:
@@ -140,11 +141,11 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
     for piece in room.pieces:
         r.add(piece.mesh, piece.texture)
     rng = np.random.default_rng(plan.seed)
-    built = [build(s) for s in plan.objects]
+    built = [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.objects)]
     sizes = []
     for mesh, _ in built:
         lo, hi = mesh.bounds
-        sizes.append((float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2])))
+        sizes.append((float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2]), mesh.side_area()))
     spots = place_objects(room, sizes, rng)
     lut = np.zeros(1, np.uint16)
     legend = {}
@@ -183,12 +184,14 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
 
 
 # ------------------------------------------------------------------ entry point
-def generate(out: str | Path, size: SynthSize = SynthSize(), *, workers: int | None = None, overwrite: bool = False,
-             progress: bool = False) -> FrameSet:
+def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Path | None = None,
+             workers: int | None = None, overwrite: bool = False, progress: bool = False) -> FrameSet:
     """Write a complete synthetic PIN-like frame-set to ``out`` and return it loaded.
 
-    ``workers`` processes (default: all cores) render reference views and episodes; the
-    result is byte-identical for any number of workers. ``progress`` shows a bar per stage.
+    ``scans`` is a scan folder (``pin-match data prepare gso``; default: the scans shipped with
+    pin_match) whose ``families.csv`` names the families. ``workers`` processes (default: all
+    cores) render reference views and episodes; the result is byte-identical for any number of
+    workers. ``progress`` shows a bar per stage.
     """
     from tqdm import tqdm
 
@@ -197,9 +200,11 @@ def generate(out: str | Path, size: SynthSize = SynthSize(), *, workers: int | N
         raise SynthError(f"episodes must be at least 2 (one train, one val), got {size.episodes}")
     if size.frames_per_episode < 1:
         raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
-    specs = make_objects(seed, size.objects_per_category)
+    folder = ScanFolder.open(PACKAGED_SCANS if scans is None else scans)
+    specs = make_objects(folder, size.objects_per_family)
     provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
-                      objects_per_category=size.objects_per_category, frames_per_episode=size.frames_per_episode,
+                      objects_per_family=size.objects_per_family, frames_per_episode=size.frames_per_episode,
+                      scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance)
@@ -211,7 +216,8 @@ def generate(out: str | Path, size: SynthSize = SynthSize(), *, workers: int | N
             rendered = tqdm(imap(render_object, specs), total=len(specs), desc="render objects", unit="object",
                             disable=not progress, dynamic_ncols=True)
             for spec, views in zip(specs, rendered):
-                writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions))
+                writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions),
+                                  origin=ObjectOrigin(spec.source, spec.licence))
             plans = []
             for episode_id, split, scene_id, objs in plan_episodes(specs, seed, size.episodes):
                 writer.add_episode(episode_id, split, scene_id, objs[0].object_id, [o.object_id for o in objs[1:]])

@@ -239,43 +239,56 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> N
         room.footprints.append(rect)
 
 
-def place_objects(room: Room, sizes: list[tuple[float, float]], rng: np.random.Generator,
+def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.random.Generator,
                   ) -> list[tuple[float, float, float, float]]:
-    """Stand objects (radius, height) on free spots of the room's surfaces: (x, y, z, yaw) each.
+    """Stand objects (radius, height, side area) on free spots of the room's surfaces: (x, y, z, yaw) each.
 
     Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
     nightstand, but every kind of surface gets used; shelves only take what fits under the
-    next board; the rug takes no small object (keys, a watch), which a camera 1.31 m high
-    would never see larger than a speck. An object that fits on no surface (a big one in a room of small furniture,
-    or one that comes after the surfaces filled up) stands on the floor along a wall, clear
-    of furniture, as large objects do in a real house; the room's middle stays free for
-    the camera walk. Every draw comes from ``rng``, so the result is still a pure function
-    of the seeds. Only a room without any free floor along its walls is an error.
+    next board; the rug takes no small object, which a camera 1.31 m high would never see
+    larger than a speck; a small product (a bottle, an ink box, a game case, under
+    ``SMALL_AREA`` seen side-on) stands on a surface at least ``SMALL_MIN_HEIGHT`` high where
+    the room has one free, since on a coffee table or a sofa seat it stays under 1,500 pixels
+    even from where an agent stops beside it. An object that fits on no surface (a big one in
+    a room of small furniture, or one that comes after the surfaces filled up) stands on the
+    floor along a wall, clear of furniture, as large objects do in a real house; the room's
+    middle stays free for the camera walk. Every draw comes from ``rng``, so the result is
+    still a pure function of the seeds. Only a room without any free floor along its walls is
+    an error.
     """
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
     weights = np.array([np.sqrt(s.area) for s in room.surfaces])
-    for radius, height in sizes:
+    for radius, height, side_area in sizes:
         fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
                          and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
-        p = weights * fits
-        placed = False
-        for _ in range(200 if p.sum() else 0):
-            s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
-            x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
-            if all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02 for ox, oy, z, r in taken):
-                taken.append((x, y, s.z, radius))
-                out.append((float(x), float(y), float(s.z), float(rng.uniform(-np.pi, np.pi))))
-                placed = True
-                break
-        if not placed:
+        high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
+        spot = None
+        if side_area < SMALL_AREA:
+            spot = _surface_spot(room, weights * fits * high, radius, taken, rng)
+        spot = spot or _surface_spot(room, weights * fits, radius, taken, rng)
+        if spot is None:
             x, y = _floor_spot(room, radius, taken, rng)
-            taken.append((x, y, 0.0, radius))
-            out.append((x, y, 0.0, float(rng.uniform(-np.pi, np.pi))))
+            spot = (x, y, 0.0)
+        taken.append((spot[0], spot[1], spot[2], radius))
+        out.append((*spot, float(rng.uniform(-np.pi, np.pi))))
     return out
 
 
+def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
+                  rng: np.random.Generator) -> tuple[float, float, float] | None:
+    """A free spot (x, y, z) on a surface drawn with weights ``p``, clear of the objects already placed; or None."""
+    for _ in range(200 if p.sum() else 0):
+        s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
+        x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
+        if all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02 for ox, oy, z, r in taken):
+            return float(x), float(y), float(s.z)
+    return None
+
+
 SMALL_ON_FLOOR = 0.12  # objects of a smaller radius go on furniture: seen from 1.31 m on the floor they stay specks
+SMALL_AREA = 0.01  # m^2 seen side-on: a supplement bottle (0.004), an ink box (0.008), a game case (0.007)
+SMALL_MIN_HEIGHT = 0.7  # tables, cabinets and the upper shelf boards
 FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
 
 

@@ -1,8 +1,8 @@
-"""Triangle meshes with UVs, built from a few primitives so every object and room stays procedural.
+"""Triangle meshes with UVs: the form the renderer draws, and the few primitives the rooms are built from.
 
-All parts of one object are merged into a single mesh whose UVs point into one texture atlas:
-pybullet's TinyRenderer takes one texture per visual shape, so an atlas is what lets a mug have
-a patterned body and a plain handle in a single draw.
+A scanned object (``scans``) arrives as one ``Mesh`` whose UVs point into its one texture; the
+room's walls, furniture and plants are boxes, cylinders and ellipsoids merged into one mesh per
+textured piece, since pybullet's TinyRenderer takes one texture per visual shape.
 """
 
 from __future__ import annotations
@@ -34,16 +34,8 @@ class Mesh:
     def scaled(self, factors) -> Mesh:
         return Mesh(self.vertices * np.asarray(factors, float), self.uvs, self.faces)
 
-    def moved(self, offset=(0.0, 0.0, 0.0), rotation: np.ndarray | None = None) -> Mesh:
-        v = self.vertices if rotation is None else self.vertices @ np.asarray(rotation).T
-        return Mesh(v + np.asarray(offset, float), self.uvs, self.faces)
-
-    def in_tile(self, tile: int, grid: int) -> Mesh:
-        """Squeeze [0, 1] UVs into one cell of a grid x grid atlas (with a small inset against bleeding)."""
-        row, col = divmod(tile, grid)
-        inset = 0.02
-        uv = np.clip(self.uvs, 0.0, 1.0) * (1 - 2 * inset) + inset
-        return Mesh(self.vertices, np.stack([(col + uv[:, 0]) / grid, (row + uv[:, 1]) / grid], 1), self.faces)
+    def moved(self, offset=(0.0, 0.0, 0.0)) -> Mesh:
+        return Mesh(self.vertices + np.asarray(offset, float), self.uvs, self.faces)
 
     @property
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
@@ -63,30 +55,6 @@ def merge(meshes: list[Mesh]) -> Mesh:
         start += len(m.vertices)
     return Mesh(np.concatenate([m.vertices for m in meshes]), np.concatenate([m.uvs for m in meshes]),
                 np.concatenate(faces))
-
-
-def split_facing(mesh: Mesh, direction, min_cos: float = 0.9) -> tuple[Mesh, Mesh]:
-    """Split off the triangles facing ``direction`` (a front face gets the logo, the rest stays plain)."""
-    tri = mesh.vertices[mesh.faces]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-12)
-    sel = n @ np.asarray(direction, float) > min_cos
-    return Mesh(mesh.vertices, mesh.uvs, mesh.faces[sel]), Mesh(mesh.vertices, mesh.uvs, mesh.faces[~sel])
-
-
-def rot_z(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1.0]])
-
-
-def rot_x(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[1.0, 0, 0], [0, c, -s], [0, s, c]])
-
-
-def rot_y(angle: float) -> np.ndarray:
-    c, s = np.cos(angle), np.sin(angle)
-    return np.array([[c, 0, s], [0, 1.0, 0], [-s, 0, c]])
 
 
 def _grid(points: np.ndarray, uvs: np.ndarray) -> Mesh:
@@ -136,8 +104,8 @@ def box(sx: float, sy: float, sz: float, uv_metres: float | None = None) -> Mesh
 def lathe(radii, heights, segments: int = 24, caps: bool = True) -> Mesh:
     """A surface of revolution about z from a profile (radius, height) listed bottom to top.
 
-    U runs around the axis (the seam at angle 0 faces +x, so front prints at U=0.75 face -y),
-    V runs along the profile; caps close the ends with flat discs.
+    U runs around the axis (the seam at angle 0 faces +x), V runs along the profile; caps close
+    the ends with flat discs.
     """
     r = np.asarray(radii, float)
     z = np.asarray(heights, float)
@@ -170,13 +138,3 @@ def ellipsoid(rx: float, ry: float, rz: float, segments: int = 20) -> Mesh:
     phi = np.linspace(0, np.pi, segments // 2 + 1)
     return lathe(np.sin(phi), -np.cos(phi), segments, caps=False).scaled((rx, ry, rz))
 
-
-def torus(major: float, minor: float, arc: float = 2 * np.pi, segments: int = 24, sides: int = 10) -> Mesh:
-    """A torus (or an arc of one) in the xz plane around the origin: handles, headbands, rims."""
-    a = np.linspace(0, arc, segments + 1)
-    b = np.linspace(0, 2 * np.pi, sides + 1)
-    aa, bb = np.meshgrid(a, b, indexing="ij")
-    rr = major + minor * np.cos(bb)
-    pts = np.stack([rr * np.cos(aa), minor * np.sin(bb), rr * np.sin(aa)], -1)
-    uvs = np.stack([aa / max(arc, 1e-9), bb / (2 * np.pi)], -1)
-    return _grid(pts, uvs)

@@ -1,4 +1,4 @@
-"""Procedural texture tiles: colours, patterns, photo prints and text, room materials.
+"""Procedural texture tiles for the rooms: named colours, patterns and materials (wood, fabric, tiles, wallpaper).
 
 Everything here is drawn with numpy and OpenCV from an explicit random generator, so a
 texture is a pure function of its arguments and the generator's state.
@@ -11,7 +11,7 @@ import numpy as np
 
 TILE = 256
 
-# Named colours, so that what is painted is exactly what the descriptions say.
+# Named colours, so a room's materials are drawn from a readable palette (pictures draw from all of them).
 COLOURS: dict[str, tuple[int, int, int]] = {
     "red": (200, 30, 35), "dark red": (120, 20, 30), "orange": (235, 120, 25), "yellow": (240, 205, 40),
     "lime green": (150, 210, 50), "green": (40, 140, 60), "dark green": (25, 80, 40), "teal": (20, 140, 140),
@@ -24,17 +24,10 @@ COLOURS: dict[str, tuple[int, int, int]] = {
     "lavender": (185, 160, 220), "coral": (245, 120, 100), "khaki": (170, 160, 110),
 }
 
-PATTERNS = ("plain", "striped", "checked", "polka-dot", "zigzag", "camouflage", "plaid", "floral")
-WORDS = ("NOVA", "ZEN", "HELLO", "LOVE", "PARIS", "RIO", "SURF", "CAT", "GO!", "ACE", "MOM", "BOSS", "JOY", "KAI",
-         "MAX", "OK", "SUN", "YES", "LUNA", "PIXEL", "ROCK", "COOL", "BEST", "DAD")
 
-
-def rgb(name: str, rng: np.random.Generator | None = None, jitter: float = 0.0) -> np.ndarray:
-    """The named colour, optionally jittered a little so two 'blue' objects are not pixel-identical."""
-    base = np.array(COLOURS[name], float)
-    if rng is not None and jitter:
-        base = base * (1 + rng.uniform(-jitter, jitter)) + rng.uniform(-jitter, jitter, 3) * 60
-    return np.clip(base, 0, 255)
+def rgb(name: str) -> np.ndarray:
+    """The named colour as floats."""
+    return np.array(COLOURS[name], float)
 
 
 def solid(colour: np.ndarray, rng: np.random.Generator, grain: float = 6.0, size: int = TILE) -> np.ndarray:
@@ -77,49 +70,8 @@ def pattern(kind: str, c1: np.ndarray, c2: np.ndarray, rng: np.random.Generator,
     return img
 
 
-def photo(img: np.ndarray, rgba: np.ndarray, centre=(0.5, 0.5), scale: float = 0.45) -> np.ndarray:
-    """Print an RGBA photo onto a tile, its longer side ``scale`` of the tile's (in place, also returned)."""
-    size = img.shape[0]
-    h, w = rgba.shape[:2]
-    k = scale * size / max(h, w)
-    pw, ph = max(1, int(round(w * k))), max(1, int(round(h * k)))
-    small = cv2.resize(rgba, (pw, ph), interpolation=cv2.INTER_AREA if k < 1 else cv2.INTER_CUBIC)
-    x0 = int(np.clip(round(centre[0] * size - pw / 2), 0, size - pw))
-    y0 = int(np.clip(round(centre[1] * size - ph / 2), 0, size - ph))
-    alpha = small[..., 3:].astype(np.float32) / 255.0
-    region = img[y0:y0 + ph, x0:x0 + pw].astype(np.float32)
-    img[y0:y0 + ph, x0:x0 + pw] = np.round(region * (1 - alpha) + small[..., :3] * alpha).astype(np.uint8)
-    return img
-
-
-def text(img: np.ndarray, word: str, colour: np.ndarray, centre=(0.5, 0.5), width: float = 0.8,
-         label: np.ndarray | None = None) -> np.ndarray:
-    """Print a word, fitted to ``width`` of the tile, centred at ``centre`` (in place, also returned).
-
-    ``label`` paints a patch of that colour behind the word, so it stays legible on a pattern.
-    """
-    size = img.shape[0]
-    font = cv2.FONT_HERSHEY_DUPLEX
-    (tw, th), _ = cv2.getTextSize(word, font, 1.0, 2)
-    scale = width * size / max(tw, 1)
-    thick = max(1, int(round(scale * 2)))
-    (tw, th), _ = cv2.getTextSize(word, font, scale, thick)
-    org = (int(centre[0] * size - tw / 2), int(centre[1] * size + th / 2))
-    if label is not None:
-        pad = max(3, th // 3)
-        cv2.rectangle(img, (org[0] - pad, org[1] - th - pad), (org[0] + tw + pad, org[1] + pad),
-                      tuple(int(v) for v in label), -1)
-    cv2.putText(img, word, org, font, scale, tuple(int(v) for v in colour), thick, cv2.LINE_AA)
-    return img
-
-
 def shade(colour: np.ndarray, factor: float) -> np.ndarray:
     return np.clip(np.asarray(colour, float) * factor, 0, 255)
-
-
-def contrasting(colour: np.ndarray) -> np.ndarray:
-    """White on dark colours, near-black on light ones: for printed text."""
-    return np.array([245.0, 245, 240]) if np.dot(colour, [0.3, 0.59, 0.11]) < 140 else np.array([25.0, 25, 30])
 
 
 # ------------------------------------------------------------------ room materials

@@ -1,0 +1,19 @@
+"""How much a synthetic set holds, apart from the generator so the command line reads it without loading pybullet."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True)
+class SynthSize:
+    """How much a synthetic set holds; the seed draws everything else. The defaults are the embedded default set:
+    every shipped family a target once in each split."""
+
+    seed: int = 0
+    episodes: int = 30
+    objects_per_family: int = 5
+    frames_per_episode: int = 48
+
+
+DEFAULT_SIZE = SynthSize()  # the embedded default set
