@@ -288,7 +288,7 @@ def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[fl
 
 SMALL_ON_FLOOR = 0.12  # objects of a smaller radius go on furniture: seen from 1.31 m on the floor they stay specks
 SMALL_AREA = 0.01  # m^2 seen side-on: a supplement bottle (0.004), an ink box (0.008), a game case (0.007)
-SMALL_MIN_HEIGHT = 0.7  # tables, cabinets and the upper shelf boards
+SMALL_MIN_HEIGHT = 0.78  # cabinets and the upper shelf boards: shallow, so a camera can stand within 0.6 m
 FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
 
 
