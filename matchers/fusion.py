@@ -78,7 +78,7 @@ class FusionMatcher(CompositeMatcher):
     modality = Modality.VISUAL
     weights_spec = FittedFileSpec(package="pin_match.matchers", package_file="fusion_lookalike.json",
                                   distribution="pin-match",
-                                  license="the fusion file's own: weights fitted by pin_match (Apache-2.0)")
+                                  license="the fusion file's own: weights fitted by pin_match (MIT)")
     default_sigma = 0.0  # the logit at probability 1/2 under the fitting's class weights
     version = 1
     paper = "pin_match: score fusion fitted on a train split of real look-alikes"

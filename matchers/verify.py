@@ -169,7 +169,7 @@ class VerifyMatcher(CompositeMatcher):
     modality = Modality.VISUAL
     weights_spec = FittedFileSpec(package="pin_match.matchers", package_file="verify_myvlm.json",
                                   distribution="pin-match",
-                                  license="the verifier file's own: weights fitted by pin_match (Apache-2.0)")
+                                  license="the verifier file's own: weights fitted by pin_match (MIT)")
     # PIN's first-match objective on MyVLM pasted's train instances (docs/instance-matchers.md); how far this
     # one sigma carries to other sets is measured there: tune it on frames like the agent's
     default_sigma = 0.658

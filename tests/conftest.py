@@ -112,7 +112,8 @@ def shipped_pasted(tmp_path_factory):
 
 @pytest.fixture(scope="session")
 def default_synth(tmp_path_factory):
-    """The default synthetic set of ``pin-match synth`` (1,286 frames): rendered once per session."""
+    """The default set of ``pin-match synth`` (``SynthSize()``: scanned look-alike families, 30 episodes): rendered
+    once per session."""
     from pin_match.data.synth import SynthSize, generate
 
     return generate(tmp_path_factory.mktemp("synth_default") / "frameset", SynthSize(), workers=2)

@@ -1,11 +1,12 @@
 """The weight-free matchers find the target: scores rank target > same-category look-alike > nothing.
 
-Measured on the default synthetic frame-set of ``pin-match synth`` (exact ground truth, same
-bytes for the seed), by mean score per frame class: frames showing the target; frames showing
-a same-category distractor but not the target; frames showing no object at all. SIFT needs
-``min_inliers`` verified matches, which the renders rarely give (at least 5 target frames, never
-a frame showing nothing), so for it look-alike and nothing may tie at 0. The real-photo
-tests check SIFT's floor and colour's saturation (issue 14.10, 14.11).
+Measured on the default frame-set of ``pin-match synth``: real scanned products (Google Scanned
+Objects) in look-alike families, rendered along PIN walks (exact ground truth, same bytes for the
+seed), by mean score per frame class: frames showing the target; frames showing a look-alike of
+its family but not the target; frames showing no object at all. SIFT needs ``min_inliers``
+verified matches, which the renders rarely give (at least 5 target frames, never a frame showing
+nothing), so for it look-alike and nothing may tie at 0. The real-photo tests check SIFT's floor
+and colour's saturation (issue 14.10, 14.11).
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ def test_scores_rank_target_above_lookalikes_above_nothing(name, default_synth, 
     message = f"{name}: target {means[0]:.3f}, look-alike {means[1]:.3f}, nothing {means[2]:.3f}"
     if name == "color":
         assert means[0] > means[1] > means[2], message
-    else:  # sift verifies a model only with min_inliers: rarely on these small renders, never by chance
+    else:  # sift verifies a model only with min_inliers: rarely on these renders, never by chance
         assert means[0] > means[1] >= means[2], message
         assert scored.score[nothing].max() == 0.0 and (scored.score[target] >= 5).sum() >= 5
 

@@ -215,41 +215,101 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     breakdown = out[out.index("where the time went"):].splitlines()[1:]
     breakdown = breakdown[:breakdown.index("")]
     assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "compare", "index", "total"]
-    assert "score color (synthetic, 8 frames)" in breakdown[1] and "score sift" in breakdown[2]
+    assert breakdown[0].startswith("load frame-set (scanned look-alikes)")  # the copied set is kept, not rendered
+    assert "score color (scanned look-alikes, 8 frames)" in breakdown[1] and "score sift" in breakdown[2]
     seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
     assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s
 
 
 def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frameset, tmp_path, capsys):
-    """The last line printed is the path of one index.html: both tables, each report, each compare page."""
+    """The last line printed is the path of one index.html: both tables, each report, each compare page; the
+    scanned set (the demo folder itself) first, the real look-alikes (``lookalikes/``) second."""
     import shutil
 
-    shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
+    from markupsafe import escape
+
+    from pin_match.evaluation.demo import LOOKALIKES, SCANNED
+
+    shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")  # no seed recorded: kept as the scanned set
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
                  "--lookalike-matcher", "color", "--lookalike-matcher", "sift", "--workers", "1", "--quiet"]) == 0
     index = Path(capsys.readouterr().out.strip().splitlines()[-1].split(": ")[-1])
     assert index == tmp_path / "demo" / "index.html"
     text = index.read_text(encoding="utf-8")
-    assert re.findall(r'<a href="([^"]+)"', text) == [  # the real set first: it is the one that ranks
+    assert re.findall(r'<a href="([^"]+)"', text) == [  # the scanned set first, then the real photos
+        "reports/color/report.html", "reports/sift/report.html", "compare/sift_vs_color/compare.html",
         "lookalikes/reports/color/report.html", "lookalikes/reports/sift/report.html",
-        "lookalikes/compare/sift_vs_color/compare.html",
-        "reports/color/report.html", "reports/sift/report.html", "compare/sift_vs_color/compare.html"]
+        "lookalikes/compare/sift_vs_color/compare.html"]
     assert all((index.parent / href).is_file() for href in re.findall(r'<a href="([^"]+)"', text))
-    assert text.count("<table>") == 2 and "synthetic" in text and "look-alikes" in text
+    assert text.count("<table>") == 2
+    captions = [text.index(escape(c)) for c in (SCANNED.caption, LOOKALIKES.caption)]
+    assert captions[0] < captions[1] < text.index("Reports and comparisons")
+    assert "scanned products" in SCANNED.caption and LOOKALIKES.caption.startswith("real photos")
 
 
 def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
+    """After the scanned set (here the copied tiny set, kept: it records no seed) the demo builds the real
+    look-alikes under ``lookalikes/`` and prints their table second."""
     import shutil
+
+    from pin_match.evaluation.demo import LOOKALIKES, SCANNED
 
     shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--lookalike-matcher", "color",
                  "--workers", "1", "--quiet"]) == 0
     out = capsys.readouterr().out
-    assert "on the synthetic val split" in out and "real photos: val instances of CORe50 objects" in out
+    assert f"on {SCANNED.caption};" in out and f"on {LOOKALIKES.caption};" in out
+    assert out.index("scanned products") < out.index("real photos: val instances of CORe50 objects")
     real = out[out.index("real photos"):out.index("reports, plots")]
     assert "AUROC-same" in real and "color@" in real and "n/a" not in real.split("\n| color@")[1].split("\n")[0]
+    assert "load frame-set (scanned look-alikes)" in out and "build frame-set (scanned look-alikes)" not in out
     assert "build frame-set (look-alikes)" in out and "score color (look-alikes, " in out
-    assert (tmp_path / "demo" / "lookalikes" / "table.md").is_file()
+    assert (tmp_path / "demo" / "lookalikes" / "table.md").is_file() and (tmp_path / "demo" / "table.md").is_file()
+
+
+def test_demo_builds_again_a_frameset_made_with_another_seed(tiny_frameset, tmp_path):
+    """``_load_or_make`` keeps the frame-set found when its provenance records the demo's seed (or no seed, as
+    a hand-made set); one recording another seed is removed and made again."""
+    import json
+    import shutil
+
+    from pin_match.data.frameset import MANIFEST, FrameSet
+    from pin_match.evaluation.bench import Stopwatch
+    from pin_match.evaluation.demo import _load_or_make
+
+    made = []
+
+    def make(path: Path) -> FrameSet:
+        made.append(path)
+        assert not path.exists()  # the stale set is gone before it is made again
+        shutil.copytree(tiny_frameset.root, path)
+        return FrameSet.load(path)
+
+    def with_seed(seed: int | None) -> Path:
+        path = tmp_path / f"seed_{seed}" / "frameset"
+        shutil.copytree(tiny_frameset.root, path)
+        manifest = json.loads((path / MANIFEST).read_text(encoding="utf-8"))
+        manifest["provenance"] = {} if seed is None else {**manifest["provenance"], "seed": seed}
+        (path / MANIFEST).write_text(json.dumps(manifest), encoding="utf-8")
+        return path
+
+    watch = Stopwatch()
+    stale = with_seed(5)
+    fs = _load_or_make(stale, 0, watch, make)
+    assert made == [stale] and fs.root == stale and fs.manifest["provenance"] == {}  # made again: the copy
+    assert list(watch.seconds) == ["load frame-set", "build frame-set"]
+
+    for seed in (0, None):
+        made.clear()
+        watch = Stopwatch()
+        kept = with_seed(seed)
+        fs = _load_or_make(kept, 0, watch, make)
+        assert made == [] and fs.manifest["provenance"] == ({} if seed is None else {"seed": 0})
+        assert list(watch.seconds) == ["load frame-set"]
+
+    made.clear()
+    assert _load_or_make(tmp_path / "absent" / "frameset", 0, Stopwatch(), make).root.is_dir()
+    assert made == [tmp_path / "absent" / "frameset"]
 
 
 def test_bench_configures_each_matcher_by_name(tiny_frameset, tmp_path, capsys):

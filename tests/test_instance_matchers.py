@@ -198,3 +198,14 @@ def test_the_carried_fusion_file_fits_its_components_as_they_are_now():
 
     recorded = [c["id"] for c in read_fusion(FusionMatcher.weights_spec.resolve(None))["components"]]
     assert [part.id for part in create_matcher("fusion").components] == recorded
+
+
+def test_the_carried_fusion_file_is_under_the_projects_licence():
+    """Issue 43.1: the file was fitted by pin_match, so it comes under pin_match's licence (MIT), not Apache-2.0."""
+    from importlib.metadata import metadata
+
+    from pin_match.matchers.fusion import FusionMatcher
+
+    project = metadata("pin-match")["License"]
+    assert project == "MIT"
+    assert f"({project})" in FusionMatcher.weights_spec.license and "Apache" not in FusionMatcher.weights_spec.license

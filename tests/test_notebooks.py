@@ -6,6 +6,7 @@ Executed copies go to pytest's tmp folder only: the notebooks in git keep no out
 from __future__ import annotations
 
 import json
+import re
 import shutil
 from pathlib import Path
 
@@ -42,6 +43,19 @@ def test_every_notebook_is_shipped_without_outputs():
         assert "parameters" in code[0].get("metadata", {}).get("tags", []), path.name
         for cell in code:
             assert cell["outputs"] == [] and cell["execution_count"] is None, path.name
+
+
+def test_the_readme_installs_what_opens_the_notebooks_and_counts_them_right():
+    """Issue 43.5: the README said ``jupyter lab`` but no extra installed Jupyter, and counted five notebooks."""
+    tomllib = pytest.importorskip("tomllib")  # Python 3.11+
+    readme = (REPO / "notebooks" / "README.md").read_text(encoding="utf-8")
+    extras = tomllib.loads((REPO / "pyproject.toml").read_text(encoding="utf-8"))["project"]["optional-dependencies"]
+    assert "pip install -e '.[notebooks]'" in readme and "notebooks" in extras
+    installed = {re.split(r"[<>=!~\[; ]", requirement)[0].lower() for requirement in extras["notebooks"]}
+    assert {"jupyterlab", "ipykernel", "nbconvert"} <= installed  # jupyter lab, the kernel, the headless run
+    words = ["no", "one", "two", "three", "four", "five", "six", "seven", "eight", "nine", "ten"]
+    assert f"executes all {words[len(NAMES)]} " in " ".join(readme.split())
+    assert all(f"`{name}`" in readme for name in NAMES)
 
 
 def test_load_bench(bench_run):

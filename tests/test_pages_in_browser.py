@@ -84,17 +84,30 @@ def test_frameset_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
 
 
 def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
-    """The demo's index.html (headline, paired comparison, each matcher's first match drawn, links) on a small set."""
+    """The demo's index.html (headline, paired comparison, each matcher's first match drawn, links) in the demo's
+    order: the scanned set (the demo folder itself) first, the real look-alikes (``lookalikes/``) second; both
+    sets are the tiny one here, so that nothing is rendered."""
     import shutil
+    from dataclasses import replace
 
-    from pin_match.evaluation.demo import DemoSet, demo
+    from markupsafe import escape
+
+    from pin_match.evaluation.demo import LOOKALIKES, SCANNED, demo
     from pin_match.scoring import RunOptions
 
     def copy(out: Path, seed: int, run: RunOptions):
         shutil.copytree(tiny_frameset.root, out)
         return type(tiny_frameset).load(out)
 
-    sets = [DemoSet("tiny", "", "the tiny hand-made set", copy, ("color", "sift"))]
+    sets = [replace(SCANNED, build=copy, matchers=("color", "sift")), replace(LOOKALIKES, build=copy,
+                                                                              matchers=("color",))]
     results = demo(tmp_path / "demo", sets, run=RunOptions(workers=1, progress=False))
-    assert len(results) == 1 and len(results[0].comparisons) == 1
-    check_page(browser, tmp_path / "demo" / "index.html", "index.png")
+    assert [r.name for r in results] == ["scanned look-alikes", "look-alikes"]
+    assert [len(r.comparisons) for r in results] == [1, 0]
+    index = tmp_path / "demo" / "index.html"
+    text = index.read_text(encoding="utf-8")
+    assert text.index(escape(SCANNED.caption)) < text.index(escape(LOOKALIKES.caption))
+    assert re.findall(r'<a href="([^"]+)"', text) == ["reports/color/report.html", "reports/sift/report.html",
+                                                       "compare/sift_vs_color/compare.html",
+                                                       "lookalikes/reports/color/report.html"]
+    check_page(browser, index, "index.png")

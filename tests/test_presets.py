@@ -78,3 +78,46 @@ def test_the_lite_variants_are_effnets_matcher_with_other_data():
         assert issubclass(cls, EffnetMatcher) and issubclass(cls.Config, EffnetMatcher.Config)
         assert set(vars(cls)) <= {"__module__", "__qualname__", "__doc__", "__abstractmethods__", "_abc_impl",
                                   "Config", "weights_spec", "default_sigma", "name"}
+
+
+@dataclass
+class TableConfig(MatcherConfig):
+    weights_by_role: dict = field(default_factory=dict, metadata={"help": "a weight per role"})
+    roles: list = field(default_factory=list)
+
+
+class Table(BrightMatcher):
+    Config = TableConfig
+
+
+def test_a_preset_may_set_a_dict_or_list_default_and_each_config_gets_its_own_copy():
+    """Issue 43.2a: a dict or list value once failed as dataclasses' "mutable default"."""
+    given = {"weights_by_role": {"a": 1.0, "b": [2.0]}, "roles": ["a", "b"]}
+
+    class Weighted(Table, preset=Preset(config=given)):
+        pass
+
+    first, second = Weighted.Config(), Weighted.Config()
+    assert first.weights_by_role == {"a": 1.0, "b": [2.0]} and first.roles == ["a", "b"]
+    first.weights_by_role["b"].append(3.0)
+    first.roles.append("c")
+    assert second.weights_by_role == {"a": 1.0, "b": [2.0]} and second.roles == ["a", "b"]
+    assert Weighted.Config().roles == ["a", "b"] and given["weights_by_role"] == {"a": 1.0, "b": [2.0]}
+    field_ = {f.name: f for f in dataclasses.fields(Weighted.Config)}["weights_by_role"]
+    assert field_.metadata == {"help": "a weight per role"}
+    assert Weighted().id == Weighted().id and Weighted.Config(roles=["x"]).roles == ["x"]
+
+
+def test_a_preset_sigma_that_contradicts_the_class_body_is_refused_naming_the_class():
+    """Issue 43.2b: the preset's sigma once silently replaced the class body's own ``default_sigma``."""
+    with pytest.raises(ConfigError, match=r"Contradicts: its body sets default_sigma=7\.0 and its preset 200\.0"):
+        class Contradicts(BrightMatcher, preset=Preset(default_sigma=200.0)):
+            default_sigma = 7.0
+
+    class Agrees(BrightMatcher, preset=Preset(default_sigma=200.0)):
+        default_sigma = 200.0
+
+    class BodyOnly(BrightMatcher, preset=Preset(paper="a toy")):
+        default_sigma = 7.0
+
+    assert (Agrees.default_sigma, BodyOnly.default_sigma, BodyOnly.paper) == (200.0, 7.0, "a toy")

@@ -21,9 +21,10 @@ FLOORS = [
     # need the colour check to work: effnet alone stays below them
     pytest.param("real_frameset", "verify", 0.74, 0.87, marks=pytest.mark.slow),
     # the shipped look-alike set (pasted, all 13 episodes), which chose effnet's default: 0.658 / 0.758
-    # (docs/real-matchers.md), and verify, the default offline matcher for real photos: 0.742 / 0.789
+    # (docs/real-matchers.md), and verify, the default offline matcher for real photos: 0.742 / 0.789; verify's
+    # look-alike floor sits above effnet's 0.658, so a verify that falls back to effnet's ranking fails it
     ("shipped_pasted", "effnet", 0.60, 0.70),
-    ("shipped_pasted", "verify", 0.64, 0.72),
+    ("shipped_pasted", "verify", 0.68, 0.72),
 ]
 
 

@@ -134,6 +134,19 @@ def test_a_new_file_with_the_decorator_is_all_a_built_in_needs(scan, monkeypatch
         sys.modules.pop("toy_builtins", None)
 
 
+@pytest.mark.parametrize("package, why", [("no_such_matchers_package", "not installed"),
+                                          ("no_such_parent.matchers", "not installed"),
+                                          ("json.decoder", "a module, not a package")])
+def test_the_scan_of_a_package_it_cannot_read_names_the_package(package, why):
+    """Issue 43.3c: the scan once returned no names at all, so a missing built-in package listed no matchers."""
+    scan_package.cache_clear()
+    try:
+        with pytest.raises(RegistrationError, match=rf"{re.escape(package)}.*{why}"):
+            scan_package(package)
+    finally:
+        scan_package.cache_clear()
+
+
 def test_the_scan_reads_literal_decorators_and_ignores_mere_mentions(scan):
     found = scan({"a.py": """
         \"\"\"Mentions register_matcher in prose only.\"\"\"

@@ -95,6 +95,22 @@ def test_report_writes_a_self_contained_page(tiny, tmp_path):
     assert alarms.index(f"frame {PLANTED}") < alarms.index("frame ep_val_0001")
 
 
+def test_the_images_folder_starts_empty_and_one_that_cannot_be_emptied_is_named(tmp_path):
+    """Issue 43.3b: a folder the page could not empty was once passed over, leaving the old images beside the page."""
+    from pin_match.errors import PinMatchError
+    from pin_match.evaluation.html import Assets
+
+    page = tmp_path / "report.html"
+    Assets(page, "report_files")  # no earlier page: nothing to remove
+    (tmp_path / "report_files").mkdir()
+    (tmp_path / "report_files" / "0000.jpg").write_bytes(b"an earlier page's image")
+    Assets(page, "report_files")
+    assert not (tmp_path / "report_files").exists()
+    (tmp_path / "report_files").write_text("a file where the images' folder goes")
+    with pytest.raises(PinMatchError, match=r"cannot empty the images folder .*report_files"):
+        Assets(page, "report_files")
+
+
 def test_gallery_figure_for_notebooks(tiny):
     import matplotlib
 

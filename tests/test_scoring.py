@@ -55,6 +55,37 @@ def test_rerun_hits_the_cache_and_a_new_config_does_not(tiny_frameset, tmp_path,
     assert len(log.read_text().splitlines()) == 4
 
 
+def test_read_meta_misses_a_missing_or_damaged_table_and_names_one_it_cannot_open(tmp_path, monkeypatch):
+    """Issue 43.3a: a missing or damaged table (or damaged metadata) is no cache hit; a table the process may not
+    read was once taken for a miss too, and rescored over: now it is an error naming the file."""
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    from pin_match.scoring.cache import read_meta
+    from pin_match.scoring.schema import META_KEY, encode_meta
+    from pin_match.scoring.table import ScoreTableError
+
+    good = tmp_path / "good.parquet"
+    pq.write_table(pa.table({"a": [1]}).replace_schema_metadata(encode_meta({"matcher": "x"})), good)
+    assert read_meta(good) == {"matcher": "x"}
+    assert read_meta(tmp_path / "missing.parquet") is None
+    damaged = tmp_path / "damaged.parquet"
+    damaged.write_bytes(b"PAR1 damaged")
+    assert read_meta(damaged) is None
+    whole = good.read_bytes()
+    damaged.write_bytes(whole[:-10] + whole[-8:])  # a footer pyarrow cannot parse: an OSError with no errno
+    assert read_meta(damaged) is None
+    pq.write_table(pa.table({"a": [1]}).replace_schema_metadata({META_KEY: b"{not json"}), damaged)
+    assert read_meta(damaged) is None
+
+    def denied(path, *args, **kwargs):
+        raise PermissionError(13, "Permission denied", str(path))
+
+    monkeypatch.setattr(pq, "read_schema", denied)
+    with pytest.raises(ScoreTableError, match=r"good\.parquet.*Permission denied"):
+        read_meta(good)
+
+
 def test_split_scores_only_that_split(tiny_frameset, tmp_path):
     t = score(tiny_frameset, "color", split="val", out=tmp_path, run=QUIET)
     assert set(t.frames.split) == {"val"} and len(t.frames) == 4

@@ -250,3 +250,14 @@ def test_the_carried_verifier_file_fits_the_default_signals():
     assert set(matcher.decision["coefs"]) == set(DEFAULT_SIGNALS)
 
 
+def test_the_carried_verifier_file_is_under_the_projects_licence():
+    """Issue 43.1: the file was fitted by pin_match, so it comes under pin_match's licence (MIT), not Apache-2.0."""
+    from importlib.metadata import metadata
+
+    from pin_match.matchers.verify import VerifyMatcher
+
+    project = metadata("pin-match")["License"]
+    assert project == "MIT"
+    assert f"({project})" in VerifyMatcher.weights_spec.license and "Apache" not in VerifyMatcher.weights_spec.license
+
+

@@ -17,7 +17,6 @@ from pin_match.contract.matcher import (
     MatcherError,
     MatchResult,
     Modality,
-    Preset,
     Target,
     TargetError,
     crops_field,
@@ -25,6 +24,7 @@ from pin_match.contract.matcher import (
     points_above,
     weights_field,
 )
+from pin_match.contract.preset import Preset
 from pin_match.contract.registry import (
     ENTRY_POINT_GROUP,
     RegistrationError,

@@ -19,10 +19,10 @@ import hashlib
 import json
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
@@ -159,55 +159,10 @@ def points_above(score: float, points: np.ndarray, point_scores: np.ndarray, sig
     return points[point_scores >= sigma]
 
 
-@dataclass(frozen=True)
-class Preset:
-    """What one named variant sets: config defaults, weights, default sigma, and its paper when not the matcher's.
+class PresetLike(Protocol):
+    """What ``class Name(Base, preset=...)`` takes: a ``Preset`` (``pin_match.contract.preset``)."""
 
-    Variants of a matcher (EfficientNet-Lite0, -Lite1, -Lite2; DINO and DINOv2) differ only in
-    a few config defaults (the network, its input size), their weights, their default sigma
-    and paper. As in timm's table of model configs, a matcher module keeps one class with the
-    algorithm and a table of presets; each name is still a class statement, because the
-    registry reads names from decorated classes without importing the file::
-
-        @register_matcher("effnet-lite1")
-        class EffnetLite1Matcher(EffnetMatcher, preset=EFFNET_PRESETS["effnet-lite1"]):
-            ...  # a docstring only
-
-    The preset's config defaults become the class's ``Config`` (a subclass of the base's, nested
-    as ``EffnetLite1Matcher.Config`` so it pickles by reference); a field keeps its help and hash
-    flag. A matcher id hashes the config's values, not its class, so a variant turned into a
-    preset keeps its id.
-    """
-
-    config: Mapping[str, Any] = field(default_factory=dict)
-    weights_spec: WeightsSpec | None = None
-    default_sigma: float | None = None
-    paper: str | None = None
-
-    def apply_to(self, cls: type[Matcher]) -> None:
-        """Set the preset on ``cls`` (``Matcher.__init_subclass__`` calls it for ``preset=``)."""
-        if self.config:
-            cls.Config = config_with_defaults(cls.Config, self.config, cls)
-        for attr in ("weights_spec", "default_sigma", "paper"):
-            if getattr(self, attr) is not None:
-                setattr(cls, attr, getattr(self, attr))
-
-
-def config_with_defaults(base: type[MatcherConfig], defaults: Mapping[str, Any],
-                         owner: type) -> type[MatcherConfig]:
-    """A subclass of ``base`` whose fields named in ``defaults`` default to those values, nested in ``owner``."""
-    fields = {f.name: f for f in dataclasses.fields(base)}
-    unknown = sorted(set(defaults) - set(fields))
-    if unknown:
-        raise ConfigError(f"preset of {owner.__module__}.{owner.__qualname__}: {base.__name__} has no field "
-                          f"{', '.join(unknown)}")
-    changed = [(name, fields[name].type, field(default=value, metadata=fields[name].metadata))
-               for name, value in defaults.items()]
-    config = dataclasses.make_dataclass(owner.__name__.removesuffix("Matcher") + "Config", changed, bases=(base,))
-    config.__module__, config.__qualname__ = owner.__module__, f"{owner.__qualname__}.Config"
-    config.__doc__ = f"{base.__name__} with {owner.__name__}'s defaults: " + \
-        ", ".join(f"{k}={v!r}" for k, v in defaults.items())
-    return config
+    def apply_to(self, cls: type[Matcher]) -> None: ...
 
 
 class Matcher(ABC):
@@ -227,7 +182,7 @@ class Matcher(ABC):
     # True when match_batch is thread-safe after prepare: scoring then spreads frames over threads
     parallel_frames: ClassVar[bool] = False
 
-    def __init_subclass__(cls, preset: Preset | None = None, **kwargs: Any) -> None:
+    def __init_subclass__(cls, preset: PresetLike | None = None, **kwargs: Any) -> None:
         """``class Name(Base, preset=Preset(...))``: a named variant of ``Base`` set by data (see ``Preset``)."""
         super().__init_subclass__(**kwargs)
         if preset is not None:

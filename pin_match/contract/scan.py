@@ -43,9 +43,14 @@ class Registration:
 @functools.cache
 def scan_package(package: str) -> dict[str, Registration]:
     """Registered name -> its registration, for every file in the package's folder (subfolders refused)."""
-    spec = importlib.util.find_spec(package)
-    if spec is None or not spec.submodule_search_locations:
-        return {}
+    try:
+        spec = importlib.util.find_spec(package)
+    except ModuleNotFoundError:  # a parent package of a dotted name is missing
+        spec = None
+    if spec is None:
+        raise RegistrationError(f"cannot read the matchers of package {package!r}: it is not installed")
+    if not spec.submodule_search_locations:
+        raise RegistrationError(f"cannot read the matchers of package {package!r}: it is a module, not a package")
     found: dict[str, Registration] = {}
     for folder in map(Path, spec.submodule_search_locations):
         for path in sorted(folder.rglob("*.py")):

@@ -22,6 +22,7 @@ import pandas as pd
 from markupsafe import Markup, escape
 
 from pin_match import atomic
+from pin_match.errors import PinMatchError
 from pin_match.evaluation.tables import text_rows
 
 STYLE = """
@@ -113,6 +114,10 @@ def swatch(rgb: tuple[int, int, int], label: str) -> Markup:
     return Markup('<span class="swatch" style="background: rgb({}, {}, {})"></span> {}').format(r, g, b, label)
 
 
+class AssetsError(PinMatchError, OSError):
+    """The images folder beside a page could not be emptied (an earlier page's images would stay beside it)."""
+
+
 class Assets:
     """The image folder beside a page: each image written once, named by a counter, linked relatively.
 
@@ -123,7 +128,13 @@ class Assets:
         self.page_dir = page_path.parent
         self.folder = folder
         self._names: dict[object, str] = {}
-        shutil.rmtree(self.page_dir / folder, ignore_errors=True)
+        path = self.page_dir / folder
+        if path.exists() or path.is_symlink():
+            try:
+                shutil.rmtree(path)
+            except OSError as exc:
+                raise AssetsError(f"cannot empty the images folder {path} of the page {page_path} "
+                                  f"({type(exc).__name__}: {exc})") from exc
 
     def add(self, key: object, make_rgb: Callable[[], np.ndarray], suffix: str = ".jpg") -> str:
         """The relative src of the image under ``key``, writing ``make_rgb()`` the first time it is asked for."""

@@ -61,14 +61,21 @@ def table_name(split: str | None, shard: Shard | None) -> str:
 
 
 def read_meta(path: Path) -> dict | None:
-    """A score table's metadata without reading its rows."""
+    """A score table's metadata without reading its rows; None when the file or its metadata is missing or damaged.
+
+    A missing or damaged file is simply not a cache hit. A file the system refuses to read (permissions,
+    a disk error) is a ScoreTableError naming it: taken for a miss, it would be scored again over it.
+    """
     import pyarrow.parquet as pq
 
     try:
-        metadata = pq.read_schema(path).metadata
-    except Exception:  # a damaged file is simply not a cache hit
+        return decode_meta(pq.read_schema(path).metadata)
+    except (FileNotFoundError, ValueError):  # ValueError: pyarrow's ArrowInvalid (not parquet) or damaged JSON
         return None
-    return decode_meta(metadata)
+    except OSError as exc:
+        if exc.errno is None:  # pyarrow's own "cannot parse the footer": a damaged file, no system error
+            return None
+        raise ScoreTableError(f"cannot read the score table {path} ({type(exc).__name__}: {exc})") from exc
 
 
 def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
