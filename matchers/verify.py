@@ -23,10 +23,16 @@ with the references'. This matcher does that with the default ``effnet``:
    off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
    split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id),
-   with a colour gate: below ``color_gate`` each point of colour overlap missing costs the
-   fitted gate slope in logit, so a candidate of the wrong colour fails whatever its shape and
-   texture say (one linear colour weight cannot be large on recolours and small on toys at
-   once). Each candidate's score is the fitted probability that it is the target, the frame's is its
+   plus a bounded colour penalty (the file's ``gate``, the config's ``color_gate``): below the
+   floor ``color_gate`` each unit of colour overlap (0-1) missing costs the fitted slope in logit, so
+   the penalty subtracts at most slope x floor, reached at overlap 0, besides the linear colour
+   weight's share (the hinge lets colour cost more below the floor than it adds above it: one
+   linear colour weight cannot be large on recolours and small on toys at once). It lowers a
+   candidate of the wrong colour by a bounded amount and is no veto: shape and texture terms
+   larger than the bound still pass it (the carried file's numbers: docs/instance-matchers.md).
+   The colour weight and the slope are never negative (fitted so, checked on reading), so a
+   candidate's score never rises as its colour overlap falls, the other signals fixed. Each
+   candidate's score is the fitted probability that it is the target, the frame's is its
    best candidate's. A probability means one thing on every frame-set, but its level carries only
    partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
    each with its candidate's score, and the boxes come back with the result.
@@ -98,7 +104,8 @@ class VerifyConfig(MatcherConfig):
     color_bins: tuple[int, ...] = field(default=(16, 4, 4), metadata={"help": "HSV histogram bins"})
     color_gate: float = field(default=DEFAULT_COLOR_GATE, metadata={
         "help": "colour overlap below which a candidate's logit drops in proportion to the shortfall (the verifier "
-                "file's fitted gate slope); 0: no gate, colour only adds"})
+                "file's fitted gate slope; at most slope x color_gate, at overlap 0): a bounded colour penalty, "
+                "not a veto; 0: none, colour only adds"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -129,8 +136,18 @@ class Reference:
 
 
 def read_verifier(path: Path) -> dict[str, Any]:
-    """The verifier file, checked: every problem is a WeightsError naming the file."""
-    spec = read_fitted_file(path, "verifier", VERIFIER_FORMAT, VERIFIER_VERSION)
+    """The verifier file, checked (``check_verifier``): every problem is a WeightsError naming the file."""
+    return check_verifier(read_fitted_file(path, "verifier", VERIFIER_FORMAT, VERIFIER_VERSION), path)
+
+
+def check_verifier(spec: dict[str, Any], path: Path) -> dict[str, Any]:
+    """``spec``, read from the verifier file ``path``, if its fields are whole and its colour terms never reward a
+    colour mismatch; a WeightsError naming the file otherwise.
+
+    ``verdict``'s probability cannot fall as the colour overlap rises when the colour weight
+    (``coefs["color"]``) and the penalty's slope (``gate["coef"]``) are both 0 or more;
+    ``fit_verifier`` never writes one below 0, and a file that has one is refused.
+    """
     coefs, gate = spec.get("coefs"), spec.get("gate")
     fields_ok = isinstance(coefs, dict) and bool(coefs) and not set(coefs) - set(SIGNALS) and isinstance(gate, dict)
     numbers = [*coefs.values(), spec.get("intercept"), gate.get("floor"), gate.get("coef")] if fields_ok else []
@@ -139,20 +156,30 @@ def read_verifier(path: Path) -> dict[str, Any]:
         raise WeightsError(f"verifier file {path}: needs a finite 'intercept', 'coefs' {{signal: finite number}} "
                            f"over signals of {', '.join(SIGNALS)} and a 'gate' {{floor, coef}} (floor 0: none; "
                            f"above 0 only with color)")
+    for name, value in (("coefs.color", coefs.get("color", 0.0)), ("gate.coef", gate["coef"])):
+        if value < 0:
+            raise WeightsError(f"verifier file {path}: {name} is {value}, below 0: a colour mismatch would raise the "
+                               f"probability; refit it with pin_match.fitting.verifier.fit_verifier, which keeps "
+                               f"both at 0 or more")
     return spec
 
 
 def color_shortfall(color: float, floor: float) -> float:
-    """How far a candidate's colour overlap falls below the gate's floor (0 at or above it): the gate's input."""
+    """How far a candidate's colour overlap falls below the floor (0 at or above it, -floor at overlap 0): the
+    colour penalty's input, so the penalty is between -slope x floor and 0."""
     return min(color - floor, 0.0)
 
 
 def verdict(spec: dict[str, Any], signals: dict[str, float]) -> float:
     """The fitted probability that a candidate with these signals is the target.
 
-    The gate is one more term, but one that only subtracts: a candidate whose colours fall short
-    of the floor loses logit in proportion, whatever its shape and texture say, while colours
-    above the floor add no more than the linear colour term does.
+    The logit is ``intercept + sum coef x signal + gate.coef x color_shortfall(color, gate.floor)``.
+    The last term, the colour penalty (the file calls it the gate), only subtracts: a candidate
+    whose colour overlap falls short of the floor loses ``gate.coef`` logit per unit missing, at
+    most ``gate.coef x gate.floor`` (at overlap 0), on top of the linear colour term; at or above
+    the floor it adds nothing. Bounded, it is no veto: other terms larger than that bound still
+    carry a candidate of the wrong colour. With ``coefs["color"]`` and ``gate.coef`` at 0 or more
+    (``check_verifier``) the probability never rises as the colour overlap falls.
     """
     logit = float(spec["intercept"]) + sum(float(c) * signals[s] for s, c in spec["coefs"].items())
     gate = spec["gate"]

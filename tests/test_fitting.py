@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 
+import numpy as np
 import pandas as pd
 import pyarrow as pa
 import pyarrow.parquet as pq
@@ -11,6 +12,7 @@ import pyarrow.parquet as pq
 from pin_match.cli import main
 from pin_match.contract.registry import create_matcher
 from pin_match.fitting.fusion import fit_fusion
+from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import candidate_table, fit_verifier
 from pin_match.scoring.cache import cache_dir, read_meta
 from pin_match.scoring.schema import encode_meta
@@ -81,3 +83,25 @@ def test_candidate_signals_live_in_the_score_cache_folder_and_a_bad_file_is_comp
     meta = dict(read_meta(path), frameset_fingerprint="0" * 16)
     pq.write_table(forged.replace_schema_metadata({**forged.schema.metadata, **encode_meta(meta)}), path)
     assert (candidate_table(tiny_frameset, matcher, out=tmp_path).x0 >= 0).all()
+
+
+def test_a_sign_constrained_fit_is_the_constrained_optimum():
+    """``nonnegative`` coefficients: the unconstrained fit when it obeys, else the KKT point of the constrained loss
+    (each coefficient held at 0 would only raise the loss by growing; each free one at a zero gradient)."""
+    rng = np.random.default_rng(1)
+    x = rng.normal(size=(300, 4)) * [1.0, 0.2, 3.0, 1.0] + [0.0, 0.5, -1.0, 2.0]
+    y = (x[:, 0] - 2.0 * x[:, 1] - 0.3 * x[:, 2] + rng.normal(size=300) > 0).astype(float)
+    w, l2 = np.full(300, 1 / 300), 0.5
+    free = logistic_fit(x, y, w, l2)
+    assert free[2] < 0 and free[3] < 0 and free[1] > 0  # columns 1 and 2 want negative weights
+    assert np.array_equal(logistic_fit(x, y, w, l2, nonnegative=[0, 3]), free)  # obeyed already: unchanged
+    beta = logistic_fit(x, y, w, l2, nonnegative=[1, 2])
+    assert beta[2] == 0.0 and beta[3] == 0.0 and beta[1] > 0
+    std = x.std(0)
+    p = 1 / (1 + np.exp(-(beta[0] + x @ beta[1:])))
+    gradient = x.T @ (w * (p - y)) + l2 * std**2 * beta[1:]  # of the loss logistic_fit minimises, raw coefficients
+    assert abs(w @ (p - y)) < 1e-9 and abs(gradient[0]) < 1e-9 and abs(gradient[3]) < 1e-9
+    assert gradient[1] > 0 and gradient[2] > 0
+    # only the constrained column is held at 0; the other, left free, keeps its negative weight
+    only = logistic_fit(x, y, w, l2, nonnegative=[2])
+    assert only[3] == 0.0 and only[2] < 0

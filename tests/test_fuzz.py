@@ -77,7 +77,7 @@ def _damage(path: Path, kind: str, arg) -> None:
         path.write_bytes(data[:int(len(data) * arg)])
     elif kind == "garbage":
         path.write_bytes(arg)
-    elif kind == "json" and path.suffix == ".json":
+    elif kind == "json" and path.suffix == ".json" and _readable(path):
         data = json.loads(path.read_text())
         paths = [(), *_json_paths(data)]  # () replaces the whole document
         where = paths[arg[0] % len(paths)]
@@ -89,7 +89,7 @@ def _damage(path: Path, kind: str, arg) -> None:
                 node = node[key]
             node[where[-1]] = arg[1]
         path.write_text(json.dumps(data))
-    elif kind in ("drop_row", "cell", "column") and path.suffix in (".parquet", ".csv"):
+    elif kind in ("drop_row", "cell", "column") and path.suffix in (".parquet", ".csv") and _readable(path):
         df = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path, dtype=str)
         if df.empty:
             return
@@ -113,6 +113,18 @@ def _damage(path: Path, kind: str, arg) -> None:
         if data:
             data[arg[0] % len(data) if isinstance(arg, tuple) else arg % len(data)] ^= 0xFF
             path.write_bytes(bytes(data))
+
+
+def _readable(path: Path) -> bool:
+    """Whether an earlier damage of the same plan (a truncation, garbage) left the JSON or table readable to edit."""
+    try:
+        if path.suffix == ".json":
+            json.loads(path.read_text())
+        else:
+            pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path, dtype=str)
+    except Exception:  # json, pyarrow and pandas raise many kinds on a damaged file
+        return False
+    return True
 
 
 def _files(root: Path) -> list[Path]:

@@ -3,16 +3,21 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
+from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import (
     candidate_classes,
     candidate_table,
     fit_verifier,
+    fit_weights,
     frame_scores,
     on_target,
     target_share,
@@ -23,6 +28,8 @@ from pin_match.matchers.verify import (
     DEFAULT_COLOR_GATE,
     DEFAULT_SIGNALS,
     SIGNALS,
+    VerifyMatcher,
+    check_verifier,
     color_shortfall,
     read_verifier,
     verdict,
@@ -144,6 +151,91 @@ def test_the_colour_gate_only_subtracts_below_its_floor():
     # at or above the floor the gate adds nothing: -1 + 1 + 2.4 = 2.4
     assert verdict(spec, {"proto": 0.5, "color": 0.6}) == pytest.approx(1 / (1 + np.exp(-2.4)))
     assert color_shortfall(0.7, 0.5) == 0.0 and color_shortfall(0.2, 0.5) == pytest.approx(-0.3)
+
+
+def test_the_penalty_subtracts_at_most_its_slope_times_the_floor():
+    spec = dict(intercept=0.0, coefs={"proto": 1.0, "color": 0.0}, gate=dict(floor=0.8, coef=2.0))
+    logit = [np.log(p / (1 - p)) for p in (verdict(spec, {"proto": 1.0, "color": c}) for c in (0.0, 0.8, 1.0))]
+    assert logit == pytest.approx([1.0 - 2.0 * 0.8, 1.0, 1.0])  # a bounded penalty, no veto: still above 0.5
+
+
+def test_a_negative_colour_weight_or_penalty_slope_is_refused_naming_the_file(tmp_path):
+    signals = {"proto": 1.0, "color": 1.0}
+    negative_gate = verifier_file(tmp_path / "negative_gate.json", "x", signals, gate=dict(floor=0.8, coef=-0.5))
+    with pytest.raises(WeightsError, match=r"negative_gate\.json: gate\.coef is -0\.5.*colour mismatch would raise"):
+        read_verifier(negative_gate)
+    negative_colour = verifier_file(tmp_path / "negative_colour.json", "x", {"proto": 1.0, "color": -0.1})
+    with pytest.raises(WeightsError, match=r"negative_colour\.json: coefs\.color is -0\.1.*colour mismatch"):
+        read_verifier(negative_colour)
+    zero = verifier_file(tmp_path / "zero.json", "x", {"proto": 1.0, "color": 0.0}, gate=dict(floor=0.8, coef=0.0))
+    assert read_verifier(zero)["gate"]["coef"] == 0.0  # 0 is allowed: colour then does not count
+
+
+def carried_spec() -> dict:
+    return read_verifier(VerifyMatcher.weights_spec.resolve(None, "verify"))
+
+
+def test_the_carried_file_weighs_colour_up_and_passes_the_sign_check():
+    spec = carried_spec()
+    assert spec["coefs"]["color"] == pytest.approx(1.64, abs=0.005) and spec["coefs"]["color"] > 0
+    assert spec["gate"] == pytest.approx(dict(floor=0.8, coef=1.63), abs=0.005) and spec["gate"]["coef"] > 0
+
+
+COLOURS = sorted({*np.linspace(0.0, 1.0, 101).tolist(), DEFAULT_COLOR_GATE})  # the floor itself on the grid
+OTHER_SIGNALS = st.fixed_dictionaries({s: st.floats(-1.0, 1.0) for s in SIGNALS if s != "color"})
+
+
+@settings(max_examples=50, deadline=None)
+@given(others=OTHER_SIGNALS)
+def test_lowering_colour_never_raises_the_carried_files_verdict(others):
+    spec = carried_spec()
+    scores = [verdict(spec, {**others, "color": c}) for c in COLOURS]
+    assert all(lower <= higher for lower, higher in zip(scores, scores[1:]))
+
+
+@st.composite
+def verifier_specs(draw):
+    """Any spec with whole fields, whatever the signs of its coefficients."""
+    weight = st.floats(-10.0, 10.0)
+    signals = draw(st.lists(st.sampled_from(SIGNALS), min_size=1, unique=True))
+    floor = draw(st.one_of(st.just(0.0), st.floats(0.01, 0.99))) if "color" in signals else 0.0
+    return dict(intercept=draw(weight), coefs={s: draw(weight) for s in signals},
+                gate=dict(floor=floor, coef=draw(weight)))
+
+
+@settings(max_examples=300, deadline=None)
+@given(spec=verifier_specs(), others=OTHER_SIGNALS, colours=st.tuples(st.floats(0.0, 1.0), st.floats(0.0, 1.0)))
+def test_a_spec_the_reader_accepts_never_rewards_a_colour_mismatch(spec, others, colours):
+    try:
+        check_verifier(spec, Path("random.json"))
+    except WeightsError as exc:  # refused only for a negative colour weight or slope, by name
+        assert spec["coefs"].get("color", 0.0) < 0 or spec["gate"]["coef"] < 0
+        assert "random.json" in str(exc) and "a colour mismatch would raise the probability" in str(exc)
+        return
+    low, high = sorted(colours)
+    assert verdict(spec, {**others, "color": low}) <= verdict(spec, {**others, "color": high})
+
+
+def test_a_fit_where_colour_misleads_keeps_it_at_zero_and_fits_the_rest():
+    rng = np.random.default_rng(0)
+    y = np.r_[np.ones(150), np.zeros(250)]
+    used = pd.DataFrame(dict(on_target=y.astype(bool), proto=0.4 * y + rng.normal(0.3, 0.2, 400),
+                             desc=0.3 * y + rng.normal(0.5, 0.2, 400),
+                             color=np.clip(0.95 - 0.35 * y + rng.normal(0.0, 0.1, 400), 0.0, 1.0)))
+    weights = np.where(y == 1, 1 / 150, 1 / 250)
+    signals, floor = ("proto", "desc", "color"), DEFAULT_COLOR_GATE
+    x = np.c_[used[list(signals)].to_numpy(), [color_shortfall(c, floor) for c in used.color]]
+    free = logistic_fit(x, y, weights, 1.0)
+    assert free[3] < 0 and free[4] < 0  # unconstrained, a colour mismatch would raise the probability
+    fitted = fit_weights(used, weights, signals, floor, 1.0)
+    assert fitted["coefs"]["color"] == 0.0 and fitted["gate"]["floor"] == floor and fitted["gate"]["coef"] >= 0.0
+    # the others are refitted without the colour terms held at 0: the fit of proto and desc alone
+    values = [*fitted["coefs"].values(), fitted["gate"]["coef"]]
+    kept = [j for j, c in enumerate(values) if c != 0.0]
+    assert kept[:2] == [0, 1]
+    refit = logistic_fit(x[:, kept], y, weights, 1.0)
+    assert [fitted["intercept"], *(values[j] for j in kept)] == pytest.approx(refit.tolist(), rel=1e-9)
+    assert fitted["coefs"]["proto"] > 1.0 and fitted["coefs"]["desc"] > 1.0
 
 
 def test_bad_files_and_configs_are_refused_by_name(tmp_path):

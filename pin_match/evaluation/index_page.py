@@ -13,6 +13,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 from markupsafe import Markup
 
 from pin_match.evaluation import html
@@ -61,6 +62,9 @@ def comparison_lines(c: Comparison) -> list[str]:
     parts = []
     for metric in ("FM-prec", "AUROC-same", "AUROC"):
         row = c.paired.loc[metric]
+        if not np.isfinite(row[diff]):  # FM-prec where one of the two matched no episode
+            parts.append(f"{metric} n/a (one of them matched no episode)")
+            continue
         scale = "" if metric.startswith("AUROC") else " points"
         parts.append(f"{metric} {row[diff]:+.3g}{scale} (95 % CI {row['CI low']:+.3g} to {row['CI high']:+.3g})")
     t = c.test

@@ -135,13 +135,35 @@ def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.Dat
     return table[keep].reset_index(drop=True), weights[keep], counts
 
 
+def fit_weights(used: pd.DataFrame, weights: np.ndarray, signals: Sequence[str], floor: float,
+                l2: float) -> dict[str, Any]:
+    """The verifier file's numbers fitted on candidates (``on_target`` and one column per signal): its
+    ``intercept``, ``coefs`` and ``gate`` (``floor``, 0 for none, and the fitted slope).
+
+    The colour weight and the colour penalty's slope are fitted under the constraint that they
+    are not negative (``logistic_fit``'s ``nonnegative``): where the data would make either
+    negative it is 0 and the other weights are refitted without it, so a candidate whose colour
+    agrees less never scores higher (``read_verifier`` refuses a file that breaks this).
+    """
+    signals = list(signals)
+    features = used[signals].to_numpy(float)
+    if floor:  # the penalty's input is one more feature; its coefficient is the penalty's slope
+        features = np.c_[features, [color_shortfall(c, floor) for c in used.color]]
+    colour = [signals.index("color")] if "color" in signals else []
+    beta = logistic_fit(features, used.on_target.to_numpy(float), weights, l2,
+                        nonnegative=colour + ([len(signals)] if floor else []))
+    return dict(intercept=float(beta[0]), coefs={s: float(c) for s, c in zip(signals, beta[1:])},
+                gate=dict(floor=floor, coef=float(beta[-1]) if floor else 0.0))
+
+
 def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *, split: str = "train",
                  overrides: dict[str, Any] | None = None, out: str | Path = outputs.FEATURES, l2: float = 1.0,
                  progress: bool = False) -> dict[str, Any]:
     """Fit the signals' weights on ``split`` of every frame-set together and write the verifier file (atomically).
 
     ``overrides`` configure the ``verify`` matcher (``signals`` leaves some out, for an ablation);
-    the file records its ``signals_id``, so the matcher refuses it for other signals.
+    the file records its ``signals_id``, so the matcher refuses it for other signals. The numbers
+    are ``fit_weights``': the colour weight and the colour penalty's slope are never negative.
     """
     matcher = create_matcher("verify", **(overrides or {}))
     tables, labels, sources = [], [], []
@@ -153,14 +175,8 @@ def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *
         labels.append(frame_labels(fs).assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
         sources.append(dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint))
     used, weights, counts = candidate_classes(pd.concat(tables, ignore_index=True), pd.concat(labels))
-    signals, floor = list(matcher.cfg.signals), matcher.cfg.color_gate
-    features = used[signals].to_numpy(float)
-    if floor:  # the gate's input is one more feature; its coefficient is the gate's slope
-        features = np.c_[features, [color_shortfall(c, floor) for c in used.color]]
-    beta = logistic_fit(features, used.on_target.to_numpy(float), weights, l2)
     spec = dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
-                intercept=float(beta[0]), coefs={s: float(c) for s, c in zip(signals, beta[1:])},
-                gate=dict(floor=floor, coef=float(beta[-1]) if floor else 0.0),
+                **fit_weights(used, weights, matcher.cfg.signals, matcher.cfg.color_gate, l2),
                 fitted_on=dict(framesets=sources, split=split, candidates=len(used), classes=counts, l2=l2,
                                objective="weighted logistic regression, candidate on the target vs candidates of "
                                          "frames without it; target, same-category and other classes weigh the "

@@ -1,0 +1,32 @@
+"""The index page's sentences about a paired comparison, from a hand-made comparison table."""
+
+from __future__ import annotations
+
+import numpy as np
+import pandas as pd
+
+from pin_match.evaluation.compare import Comparison
+from pin_match.evaluation.index_page import comparison_lines
+
+
+def _comparison(fm_prec_diff: float) -> Comparison:
+    diff = "color@1 - verify@2"
+    paired = pd.DataFrame({diff: [fm_prec_diff, 0.143, 0.151], "CI low": [np.nan if np.isnan(fm_prec_diff) else -5.0,
+                                                                          0.001, -0.001],
+                           "CI high": [np.nan if np.isnan(fm_prec_diff) else 25.0, 0.277, 0.269]},
+                          index=["FM-prec", "AUROC-same", "AUROC"])
+    test = dict(only_a=0, only_b=1, both=0, p_value=1.0)
+    return Comparison(("verify@2", "color@1"), paired, test, [], None)
+
+
+def test_a_difference_neither_side_can_have_is_said_so_not_printed_as_nan():
+    """FM-prec is undefined when one matcher matched no episode: the sentence says so instead of '+nan'."""
+    line = comparison_lines(_comparison(float("nan")))[0]
+    assert "nan" not in line
+    assert line.startswith("color minus verify: FM-prec n/a (one of them matched no episode); AUROC-same +0.143 "
+                           "(95 % CI +0.001 to +0.277)")
+
+
+def test_a_defined_difference_keeps_its_interval():
+    line = comparison_lines(_comparison(10.0))[0]
+    assert "FM-prec +10 points (95 % CI -5 to +25)" in line
