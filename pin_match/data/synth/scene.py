@@ -259,10 +259,10 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
     weights = np.array([np.sqrt(s.area) for s in room.surfaces])
+    high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
     for radius, height, side_area in sizes:
         fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
                          and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
-        high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
         spot = None
         if side_area < SMALL_AREA:
             spot = _surface_spot(room, weights * fits * high, radius, taken, rng)
