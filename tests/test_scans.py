@@ -117,6 +117,19 @@ def test_write_and_load_round_trip_exact_to_float32(tmp_path):
     assert np.array_equal(scan.texture, texture)
 
 
+def test_the_same_mesh_written_twice_gives_the_same_bytes(tmp_path, monkeypatch):
+    """The archive's entries carry a fixed date, so a prepared scan folder does not change with the clock."""
+    import time
+
+    mesh = Mesh(np.eye(3), np.zeros((3, 2)), np.array([[0, 1, 2]]))
+    write_scan(tmp_path / "a" / "Mug", mesh, _png(np.zeros((2, 2, 3), np.uint8)))
+    later = time.time() + 3 * 24 * 3600  # three days on: np.savez_compressed would stamp another date
+    monkeypatch.setattr(time, "time", lambda: later)
+    monkeypatch.setattr(time, "localtime", lambda *_: time.gmtime(later))
+    write_scan(tmp_path / "b" / "Mug", mesh, _png(np.zeros((2, 2, 3), np.uint8)))
+    assert (tmp_path / "a" / "Mug.npz").read_bytes() == (tmp_path / "b" / "Mug.npz").read_bytes()
+
+
 def test_damaged_mesh_files_name_the_file(tmp_path):
     mesh = read_obj(QUAD_OBJ)
     names = write_scan(tmp_path / "Mug", mesh, _png(np.zeros((4, 4, 3), np.uint8)))
