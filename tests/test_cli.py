@@ -391,3 +391,15 @@ def test_compare_finds_each_matcher_by_its_config(tiny_frameset, tmp_path, capsy
     assert configured in (tmp_path / "cmp" / "compare.md").read_text(encoding="utf-8")
     rc, out, err = _run(capsys, *common, "--cfg", "colour:stride=8")
     assert rc == 2 and err.count("\n") == 1 and "overrides for colour, which is not among the compared matchers" in err
+
+
+def test_the_command_line_loads_no_renderer_until_a_set_is_rendered():
+    """pybullet prints a banner when it loads: the parser (and `pin-match synth --help`'s defaults) must not load it."""
+    import subprocess
+    import sys
+
+    code = ("import sys; from pin_match.cli.main import build_parser; build_parser(); "
+            "from pin_match.data.synth import SynthSize; SynthSize(); print('pybullet' in sys.modules)")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "False" and "pybullet build time" not in done.stderr
