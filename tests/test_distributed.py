@@ -252,3 +252,22 @@ def test_a_scheduler_lost_mid_run_is_a_clear_error_and_a_rerun_resumes(tiny_fram
     assert [t for _, t in _prepares(log)] == rest  # only the episode without a chunk was scored again
     reference = score(tiny_frameset, "test-slow", overrides={"delay": 0.0}, out=tmp_path / "local", run=QUIET)
     assert table.frames.equals(reference.frames)
+
+
+def test_candidate_signals_and_a_matcher_group_on_the_cluster_are_the_local_bytes(tiny_frameset, tmp_path, client):
+    from pin_match.fitting.verifier import candidate_table
+    from pin_match.scoring import score_many
+
+    verify = create_matcher("verify", candidates=2)
+    local = candidate_table(tiny_frameset, verify, out=tmp_path / "local", run=QUIET)
+    on_dask = candidate_table(tiny_frameset, verify, out=tmp_path / "cluster", run=RunOptions(client=client))
+    assert len(local) >= len(tiny_frameset.frames) and _bytes(tmp_path / "local", "candidates_all.parquet") \
+        == _bytes(tmp_path / "cluster", "candidates_all.parquet")
+    assert on_dask.equals(local)
+    group = ["color", "sift"]
+    score_many(tiny_frameset, group, out=tmp_path / "group_local", run=QUIET)
+    score_many(tiny_frameset, group, out=tmp_path / "group_dask", run=RunOptions(client=client))
+    for name in group:
+        (a,) = (tmp_path / "group_local").glob(f"{name}@*/*/scores_all.parquet")
+        (b,) = (tmp_path / "group_dask").glob(f"{name}@*/*/scores_all.parquet")
+        assert a.read_bytes() == b.read_bytes()

@@ -13,11 +13,14 @@ from pin_match.cli import main
 from pin_match.contract.registry import create_matcher
 from pin_match.fitting.fusion import fit_fusion
 from pin_match.fitting.logistic import logistic_fit
-from pin_match.fitting.verifier import candidate_table, fit_verifier
+from pin_match.fitting.verifier import CandidateSignals, candidate_table, fit_verifier
+from pin_match.matchers.verify import SIGNALS
+from pin_match.scoring import RunOptions
 from pin_match.scoring.cache import cache_dir, read_meta
 from pin_match.scoring.schema import encode_meta
 
 FAST = dict(signals=("proto", "margin", "desc", "color"), candidates=2)  # no keypoints: quick
+QUIET = RunOptions(progress=False)
 
 
 def run(capsys, *args) -> tuple[int, str, str]:
@@ -64,25 +67,36 @@ def test_fit_verifier_command_writes_what_the_library_fits(tiny_frameset, tmp_pa
     assert rc == 0 and "--cfg signals=proto,margin,desc,color --cfg candidates=2" in out
     spec = fit_verifier([tiny_frameset], tmp_path / "api.json", overrides=FAST, out=tmp_path / "feats")
     assert json.loads((tmp_path / "cli.json").read_text()) == as_read(spec)
-    assert len(list((tmp_path / "feats").rglob("*.parquet"))) == 1  # the command's signals were reused
+    # the command's signals were reused: one chunk, one table
+    assert sorted(p.name for p in (tmp_path / "feats").rglob("*.parquet")) == ["candidates_train.parquet",
+                                                                               "ep_train.parquet"]
 
 
 def test_candidate_signals_live_in_the_score_cache_folder_and_a_bad_file_is_computed_again(tiny_frameset, tmp_path):
     matcher = create_matcher("verify", **FAST)
-    first = candidate_table(tiny_frameset, matcher, out=tmp_path)
-    [path] = list(tmp_path.rglob("*.parquet"))
-    assert path.parent == cache_dir(tmp_path, f"verify-signals@{matcher.signals_id}", tiny_frameset.fingerprint)
-    assert read_meta(path)["episodes"] == sorted(tiny_frameset.episodes.episode_id)
+    first = candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET)
+    folder = cache_dir(tmp_path, CandidateSignals(FAST["signals"]).folder(matcher), tiny_frameset.fingerprint)
+    path = folder / "candidates_all.parquet"
+    assert read_meta(path)["signals_id"] == matcher.signals_id and read_meta(path)["signals"] == list(FAST["signals"])
+    assert sorted(p.stem for p in (folder / "chunks").glob("*.parquet")) == sorted(tiny_frameset.episodes.episode_id)
+    # another signal set is another table: its chunks hold other columns
+    assert CandidateSignals(SIGNALS).folder(matcher) != CandidateSignals(FAST["signals"]).folder(matcher)
 
-    path.write_bytes(b"PAR1 damaged")  # a damaged file is no hit: computed again and rewritten
-    pd.testing.assert_frame_equal(candidate_table(tiny_frameset, matcher, out=tmp_path), first)
+    path.write_bytes(b"PAR1 damaged")  # a damaged file is no hit: assembled again from the chunks
+    pd.testing.assert_frame_equal(candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET), first)
     assert read_meta(path)["signals_id"] == matcher.signals_id
 
     # a readable file whose metadata names another frame-set is no hit either
     forged = pa.Table.from_pandas(first.assign(x0=-1), preserve_index=False)
     meta = dict(read_meta(path), frameset_fingerprint="0" * 16)
     pq.write_table(forged.replace_schema_metadata({**forged.schema.metadata, **encode_meta(meta)}), path)
-    assert (candidate_table(tiny_frameset, matcher, out=tmp_path).x0 >= 0).all()
+    assert (candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET).x0 >= 0).all()
+
+    # a damaged chunk is computed again, the table the same
+    chunk = folder / "chunks" / "ep_val.parquet"
+    chunk.write_bytes(b"PAR1 cut short")
+    path.unlink()
+    pd.testing.assert_frame_equal(candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET), first)
 
 
 def test_a_sign_constrained_fit_is_the_constrained_optimum():

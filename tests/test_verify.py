@@ -12,10 +12,12 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
+from pin_match.evaluation.labels import frame_labels
 from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import (
     candidate_classes,
     candidate_table,
+    fit_spec,
     fit_verifier,
     fit_weights,
     frame_scores,
@@ -34,8 +36,10 @@ from pin_match.matchers.verify import (
     read_verifier,
     verdict,
 )
+from pin_match.scoring import RunOptions
 
 FAST = dict(signals=("proto", "margin", "desc", "color"), candidates=2)  # no keypoints: quick
+QUIET = RunOptions(progress=False)
 
 
 # ------------------------------------------------------------------ candidates
@@ -281,21 +285,27 @@ def test_the_id_hashes_the_file_and_the_signals_id_does_not(tmp_path):
 # ------------------------------------------------------------------ fit and live matcher
 def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(tiny_frameset, tmp_path):
     every = dict(candidates=2, signals=SIGNALS)  # keypoints included
-    spec = fit_verifier([tiny_frameset], tmp_path / "all.json", split="train", overrides=every,
-                        out=tmp_path / "features")
+    features = tmp_path / "features"
+    spec = fit_verifier([tiny_frameset], tmp_path / "all.json", split="train", overrides=every, out=features,
+                        run=QUIET)
     assert spec["fitted_on"]["classes"]["target"] >= 1 and set(spec["coefs"]) == set(SIGNALS)
     assert spec["gate"]["floor"] == DEFAULT_COLOR_GATE and spec["gate"]["coef"] != 0.0
-    # an ablation reads the same cached signals: one table, one signals id
-    path = tmp_path / "v.json"
-    spec = fit_verifier([tiny_frameset], path, split="train", overrides=FAST, out=tmp_path / "features")
-    assert len(list((tmp_path / "features").rglob("*.parquet"))) == 1
+    (train_chunk,) = features.rglob("chunks/ep_train.parquet")
+    written = train_chunk.stat().st_mtime_ns
+    # an ablation reads the one table of every signal: the train episode's chunk is not computed again
+    table = candidate_table(tiny_frameset, create_matcher("verify", **every), out=features, run=QUIET)
+    assert train_chunk.stat().st_mtime_ns == written and set(table.frame_id) == set(tiny_frameset.frames.frame_id)
+    val = tiny_frameset.split("val")  # a view of one split is that split's table, never passed off as the whole set's
+    assert set(candidate_table(val, create_matcher("verify", **every), out=features, run=QUIET).episode_id) \
+        == set(val.episodes.episode_id)
+    assert sorted(p.name for p in train_chunk.parent.parent.glob("*.parquet")) \
+        == ["candidates_all.parquet", "candidates_train.parquet", "candidates_val.parquet"]
+    matcher = create_matcher("verify", **FAST)
+    spec = fit_spec(matcher, [(tiny_frameset, frame_labels(tiny_frameset), table)], "train", 1.0)
     assert set(spec["coefs"]) == set(FAST["signals"])
+    path = tmp_path / "v.json"
+    path.write_text(json.dumps(spec))
     matcher = create_matcher("verify", weights=str(path), **FAST)
-    table = candidate_table(tiny_frameset, matcher, out=tmp_path / "features")  # read from the cache
-    assert set(table.frame_id) == set(tiny_frameset.frames.frame_id)
-    val = tiny_frameset.split("val")  # a split reads the whole set's table
-    assert set(candidate_table(val, matcher, out=tmp_path / "features").episode_id) == set(val.episodes.episode_id)
-    assert len(list((tmp_path / "features").rglob("*.parquet"))) == 1
     cached = dict(zip(*frame_scores(table, spec).T.to_numpy()))
     episode = tiny_frameset.episodes.iloc[1]
     matcher.prepare(tiny_frameset.target(episode.target_object_id))
@@ -353,3 +363,57 @@ def test_the_carried_verifier_file_is_under_the_projects_licence():
     assert f"({project})" in VerifyMatcher.weights_spec.license and "Apache" not in VerifyMatcher.weights_spec.license
 
 
+
+
+def test_a_candidate_signal_run_cut_off_resumes_from_its_chunks(tiny_frameset, tmp_path, monkeypatch):
+    matcher = create_matcher("verify", **FAST)
+    original, seen = VerifyMatcher.candidate_signals, []
+
+    def cut_off_at_the_second_target(self, images):
+        seen.append(self.reference)
+        if len(seen) > 1 and seen[-1] is not seen[0]:
+            raise KeyboardInterrupt  # the run is killed in its second episode
+        return original(self, images)
+
+    monkeypatch.setattr(VerifyMatcher, "candidate_signals", cut_off_at_the_second_target)
+    with pytest.raises(KeyboardInterrupt):
+        candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET)
+    (done,) = tmp_path.rglob("chunks/*.parquet")
+    assert not list(tmp_path.rglob("candidates_*.parquet"))  # nothing half-written
+    episodes = []
+    monkeypatch.setattr(VerifyMatcher, "candidate_signals",
+                        lambda self, images: episodes.append(self.reference) or original(self, images))
+    table = candidate_table(tiny_frameset, matcher, out=tmp_path, run=QUIET)
+    assert len({id(r) for r in episodes}) == 1  # only the episode without a chunk is computed again
+    assert set(table.episode_id) == set(tiny_frameset.episodes.episode_id) and done.stem in set(table.episode_id)
+
+
+def test_verifier_report_runs_end_to_end_and_keys_sets_by_their_path(tiny_frameset, tmp_path, capsys):
+    import shutil
+
+    from pin_match.cli import main
+
+    twin = tmp_path / "b" / tiny_frameset.root.name  # another folder of the same name
+    shutil.copytree(tiny_frameset.root, twin)
+    out = tmp_path / "report.json"
+    code = main(["fit", "verifier-report", "--train", str(tiny_frameset.root), "--eval", str(tiny_frameset.root),
+                 f"{twin}:val", "--features", str(tmp_path / "features"), "--json", str(out),
+                 "--figure", str(tmp_path / "fig.png"), "--quiet"])
+    assert code in (0, None)
+    result = json.loads(out.read_text())
+    assert {r["set"] for r in result["rows"]} == {str(tiny_frameset.root), f"{twin}:val"}
+    labels = {r["matcher"] for r in result["rows"]}
+    assert {"effnet", "verify default", "verify default, no gate", "verify proto alone"} <= labels
+    assert not any("keypoints" in label for label in labels)  # rows only of the signals computed
+    assert (tmp_path / "fig.png").stat().st_size > 0
+
+
+def test_a_fit_with_nothing_to_fit_on_is_refused(tiny_frameset):
+    from pin_match.fitting.logistic import FitError
+
+    matcher = create_matcher("verify", **FAST)
+    with pytest.raises(FitError, match="no frame-set"):
+        fit_spec(matcher, [], "train", 1.0)
+    empty = pd.DataFrame(columns=["frame_id", "split", "on_target", *FAST["signals"]])
+    with pytest.raises(FitError, match="no candidate in split 'train'"):
+        fit_spec(matcher, [(tiny_frameset, frame_labels(tiny_frameset), empty)], "train", 1.0)

@@ -32,7 +32,7 @@ def _cmd_fusion(a: argparse.Namespace) -> None:
     from pin_match.fitting.fusion import fit_fusion
 
     spec = fit_fusion(a.frameset, components(a.component), a.out, split=a.split, out=a.cache, l2=a.l2,
-                      progress=run_options(a).progress)
+                      run=run_options(a))
     terms = " ".join(f"{c['coef']:+.3g} {c['matcher']}" for c in spec["components"])
     print(f"fusion logit {spec['intercept']:.3g} {terms} on {spec['fitted_on']['frames']} frames "
           f"{spec['fitted_on']['classes']} -> {a.out}\n"
@@ -43,7 +43,7 @@ def _cmd_verifier(a: argparse.Namespace) -> None:
     from pin_match.fitting.verifier import fit_verifier
 
     spec = fit_verifier(a.framesets, a.out, split=a.split, overrides=matcher_overrides(a), out=a.features, l2=a.l2,
-                        progress=run_options(a).progress)
+                        run=run_options(a))
     terms = " ".join(f"{c:+.3g} {s}" for s, c in spec["coefs"].items())
     print(f"verifier logit {spec['intercept']:.3g} {terms} on {spec['fitted_on']['candidates']} candidates "
           f"{spec['fitted_on']['classes']} -> {a.out}\n"
@@ -55,23 +55,20 @@ def _cmd_verifier_report(a: argparse.Namespace) -> None:
     import pandas as pd
 
     from pin_match import atomic
-    from pin_match.contract.registry import create_matcher
-    from pin_match.data.frameset import FrameSet
-    from pin_match.fitting.verifier import candidate_table
     from pin_match.fitting.verifier_report import candidates_figure, report
 
-    result = report(a.train, a.eval, a.features)
+    signals = dict(signals=tuple(a.signals)) if a.signals else {}
+    result = report(a.train, a.eval, a.features, run=run_options(a), **signals)
     with pd.option_context("display.width", 200, "display.max_rows", 500):
         print(pd.DataFrame(result["rows"]).round(3).to_string(index=False))
     print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"],
                           candidate_recall=result["candidate_recall"]), indent=1))
     if a.json:
-        atomic.write_json(a.json, result)
+        atomic.write_json(a.json, {k: v for k, v in result.items() if k != "sets"})
     if a.figure:
-        path, _, split = a.eval[0].partition(":")
-        fs = FrameSet.load(path).split(split or None)
-        table = candidate_table(fs, create_matcher("verify"), out=a.features)
-        print(f"wrote {candidates_figure(fs, table, result['specs']['default'], a.figure)}")
+        fs, labels, table = next(iter(result["sets"].evals.values()))
+        spec = result["specs"].get("default") or result["specs"]["all"]
+        print(f"wrote {candidates_figure(fs, labels, table, spec, a.figure)}")
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
@@ -109,6 +106,10 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--eval", nargs="+", required=True,
                    help="frame-sets read, PATH or PATH:SPLIT (a development set: its val split)")
     r.add_argument("--features", default=str(FEATURES), help="cache of candidate signals")
+    r.add_argument("--signals", nargs="+", metavar="SIGNAL",
+                   help="the signals computed, the ablation's rows being their subsets (default: verify's default "
+                        "signals; add keypoints for its rows, at 0.4x effnet's cost a frame)")
+    add_run_options(r, workers=None, batch_size=True)
     r.add_argument("--json", help="write the whole report here")
     r.add_argument("--figure", help="draw the first --eval set's decisions of the default verifier into this PNG")
     r.set_defaults(func=_cmd_verifier_report)

@@ -57,6 +57,7 @@ class FrameSet:
     episode_records: list[dict]
     frames: pd.DataFrame
     visibility: pd.DataFrame
+    split_name: str | None = None  # a view of one split (``split``) keeps the whole set's fingerprint
 
     def __post_init__(self) -> None:
         self._frame_index = self.frames.set_index("frame_id")
@@ -153,7 +154,7 @@ class FrameSet:
         visibility = self.visibility[self.visibility.frame_id.isin(frames.frame_id)].reset_index(drop=True)
         records = [r for r in self.episode_records if r["episode_id"] in set(episodes.episode_id)]
         sub = FrameSet(self.root, self.manifest, self.objects, self.descriptions, episodes, records, frames,
-                       visibility)
+                       visibility, split)
         sub.__dict__["fingerprint"] = self.fingerprint
         return sub
 
@@ -178,9 +179,7 @@ class FrameSet:
 
 # ------------------------------------------------------------------ validation helpers
 def _read_json(path: Path) -> dict:
-    if not path.exists():
-        raise FrameSetError(f"missing file {path}")
-    data = atomic.read_json(path, FrameSetError)
+    data = atomic.read_json(path, FrameSetError)  # a missing one: "missing file PATH"
     if not isinstance(data, dict):
         raise FrameSetError(f"{path} must hold a JSON object, not {type(data).__name__}")
     return data

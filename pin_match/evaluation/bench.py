@@ -27,7 +27,7 @@ from pin_match.evaluation.report import report
 from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma
 from pin_match.evaluation.tables import latex_table, markdown_table, report_row, side_by_side, sigma_caption
 from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, tune, write_thresholds
-from pin_match.scoring.api import score
+from pin_match.scoring.api import score_many
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable
 
@@ -91,7 +91,8 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
 
     ``matchers``: names, or a mapping of name to config overrides. ``data``: the frame-set, or the
     run's ``EvalContext`` (its labels, built once for every matcher, and bootstrap options). All
-    matchers are scored first (a bar each), then tuned and reported (one bar). ``watch`` collects
+    matchers are scored first, together in one pass over the frames (one bar: each frame decoded once,
+    a part several matchers share run once), then tuned and reported (one bar). ``watch`` collects
     the seconds of each step, with the number of frames scored.
     """
     from tqdm import tqdm
@@ -109,11 +110,8 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     watch = watch or Stopwatch()
     scored_split = None if sigma_from not in ("default", "paper") else REPORT_SPLIT  # no tuning: val is all it needs
     n_frames = len(ctx.fs.split(scored_split).frames)
-    tables = {}
-    for name, overrides in configs.items():
-        with watch.step(f"score {name}", f"{n_frames} frames"):
-            tables[name] = score(ctx.fs, name, overrides=overrides or None, split=scored_split, out=layout.scores,
-                                 run=run)
+    with watch.step(f"score {' + '.join(configs)}", f"{n_frames} frames, one pass"):
+        tables = dict(zip(configs, score_many(ctx.fs, configs, split=scored_split, out=layout.scores, run=run)))
     results = []
     with watch.step("tune + report"):
         for name in tqdm(configs, desc="tune + report", unit="matcher", disable=not run.progress,

@@ -42,9 +42,10 @@ def cutout_problems(views: tuple[np.ndarray, ...]) -> list[str]:
     return problems
 
 
-def counts(fs: FrameSet) -> pd.DataFrame:
-    """Objects, target episodes and frames per role, per split and target category."""
-    labels = frame_labels(fs).assign(role=lambda d: frame_roles(d))
+def counts(fs: FrameSet, labels: pd.DataFrame | None = None) -> pd.DataFrame:
+    """Objects, target episodes and frames per role, per split and target category (``labels``: ``fs``'s frame
+    labels with their ``role``, when the caller has them)."""
+    labels = labels if labels is not None else role_labels(fs)
     frames = labels.groupby(["split", "target_category", "role"]).size().unstack("role", fill_value=0)
     frames = frames.reindex(columns=list(ROLE_NAMES), fill_value=0).add_prefix("frames: ")
     episodes = fs.episodes.groupby(["split", "target_category"]).size().rename("episodes")
@@ -53,6 +54,11 @@ def counts(fs: FrameSet) -> pd.DataFrame:
     table = pd.concat([objects, episodes, frames], axis=1).fillna(0).astype(np.int64)
     table.index = [f"{split} / {category}" for split, category in table.index]
     return table.rename_axis("split / category")
+
+
+def role_labels(fs: FrameSet) -> pd.DataFrame:
+    """``frame_labels`` with each frame's role: built once per page."""
+    return frame_labels(fs).assign(role=lambda d: frame_roles(d))
 
 
 LARGE_PX = 2000  # a target this large is one an instance matcher can be asked to recognise
@@ -113,14 +119,14 @@ def write_frameset_page(fs: FrameSet, out_dir: str | Path, *, per_role: int = FR
     """Write ``index.html`` (and ``inspect_files/``) describing ``fs`` into ``out_dir``; returns the page's path."""
     path = Path(out_dir) / PAGE
     assets = html.Assets(path, ASSETS)
-    labels = frame_labels(fs).assign(role=lambda d: frame_roles(d))
+    labels = role_labels(fs)
     figures, n_bad = object_figures(fs, assets)
     shown = f"{len(figures)} of {len(fs.objects)} objects shown" + \
         (f" (capped at {MAX_OBJECTS})" if len(figures) < len(fs.objects) else "")
     parts = [html.definitions([("frame-set", fs.manifest.get("name", "")), ("folder", fs.root),
                                ("fingerprint", fs.fingerprint), ("objects", len(fs.objects)),
                                ("episodes", len(fs.episodes)), ("frames", len(fs.frames))]),
-             html.heading("Counts per split and target category"), html.table(counts(fs)),
+             html.heading("Counts per split and target category"), html.table(counts(fs, labels)),
              html.heading("Target size per split"),
              html.paragraph("Visible pixels of the target in the frames that show it (percentiles), and the "
                             f"episodes that show it at {LARGE_PX} pixels or more in at least three frames.", "note"),

@@ -1,9 +1,9 @@
 """Fit a ``fusion`` file: logistic regression on component matchers' cached scores of a train split.
 
 The fusion matcher (``matchers/fusion.py``) only applies weights; fitting needs score tables
-and labels, which live above the matchers, so it is here. Each component is scored through
-``pin_match.scoring.score`` with the usual cache (a table already there is read, never
-recomputed). Frames are the positives when the target is visible; the negatives are split by
+and labels, which live above the matchers, so it is here. The components are scored through
+``pin_match.scoring.score_many`` (one pass over the frames) with the usual cache (a table
+already there is read, never recomputed). Frames are the positives when the target is visible; the negatives are split by
 the metrics' frame classes into same-category look-alike frames and all other frames, and the
 three classes weigh the same in the loss (``labels.class_weights``). The file records the
 components (name, config, id), the frame-set's fingerprint and the split, so what a fusion was
@@ -21,10 +21,11 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.labels import TM, class_weights, frame_classes, frame_labels, scored_frames
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.labels import TM, class_weights, frame_classes, scored_frames
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
-from pin_match.scoring import RunOptions, score
+from pin_match.scoring import DEFAULT_RUN, RunOptions, score_many
 
 Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform
 
@@ -38,16 +39,18 @@ def fit_classes(labels: pd.DataFrame) -> tuple[np.ndarray, np.ndarray, dict[str,
 
 
 def component_scores(fs: FrameSet, components: list[Component], split: str, out: str | Path,
-                     progress: bool) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
-    """Labels of the split's frames with one score column per component, and the components' records."""
-    labels = frame_labels(fs)
-    labels = labels[labels.split == split].reset_index(drop=True)
-    records = []
-    for i, (name, overrides, transform) in enumerate(components):
+                     run: RunOptions) -> tuple[pd.DataFrame, list[dict[str, Any]]]:
+    """Labels of the split's frames with one score column per component, and the components' records; the
+    components are scored together, in one pass over the frames (``scoring.score_many``)."""
+    for name, _, transform in components:
         if transform not in TRANSFORMS:
             raise FitError(f"fusion component {name}: transform {transform!r}; choose one of {sorted(TRANSFORMS)}")
-        matcher = create_matcher(name, **overrides)
-        table = score(fs, matcher, split=split, out=out, run=RunOptions(progress=progress))
+    matchers = [create_matcher(name, **overrides) for name, overrides, _ in components]
+    tables = score_many(fs, matchers, split=split, out=out, run=run)
+    ctx = EvalContext(fs)
+    labels = ctx.labels[ctx.labels.split == split].reset_index(drop=True)
+    records = []
+    for i, ((name, _, transform), matcher, table) in enumerate(zip(components, matchers, tables)):
         scored = scored_frames(labels, table)
         labels[f"s{i}"] = labels.frame_id.map(dict(zip(scored.frame_id, scored.score)))
         records.append(dict(matcher=name, config=resolved_config(matcher), id=matcher.id, transform=transform))
@@ -59,14 +62,14 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
 
 def fit_fusion(frameset: FrameSet | str | Path, components: list[Component], path: str | Path, *,
                split: str = "train", out: str | Path = outputs.SCORES, l2: float = 1.0,
-               progress: bool = False) -> dict[str, Any]:
+               run: RunOptions = DEFAULT_RUN) -> dict[str, Any]:
     """Fit the weights on ``split`` of ``frameset`` and write the fusion file to ``path`` (atomically).
 
     ``components`` are (matcher name, config overrides, transform); the fusion returns the first
     component's points (``points_from`` 0), so put one that always has points, such as a patch matcher, first.
     """
     fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
-    labels, records = component_scores(fs, components, split, out, progress)
+    labels, records = component_scores(fs, components, split, out, run)
     y, weights, counts = fit_classes(labels)
     x = np.column_stack([[TRANSFORMS[r["transform"]](float(s)) for s in labels[f"s{i}"]]
                          for i, r in enumerate(records)])

@@ -6,18 +6,20 @@ or the target fills a quarter of it) is a positive; every candidate of a frame w
 target is a negative, of the same-category class when a look-alike is in view and of the
 other class otherwise; a candidate beside the target in a target frame says nothing about
 the target's signals and is left out. The three classes weigh the same, as in the score
-fusion (``labels.class_weights``). The signals of every candidate of a frame-set are computed
-once and cached by the score cache's folder rule (the matcher's ``signals_id``, the frame-set's
-fingerprint; metadata checked), so fits, ablations (signals left out) and evaluations reuse
-them; the frame score from cached signals is the matcher's own.
+fusion (``labels.class_weights``). The signals of every candidate of a frame-set are a per-frame
+product of the scoring engine (``CandidateSignals``: chunks, resume, Dask, progress, the score
+cache's rule), computed once, so fits, ablations (signals left out) and evaluations reuse them;
+the frame score from cached signals is the matcher's own.
 """
 
 from __future__ import annotations
 
-import sys
+import hashlib
+import json
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import pandas as pd
@@ -30,6 +32,7 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import (
+    DEFAULT_SIGNALS,
     SIGNALS,
     VERIFIER_FORMAT,
     VERIFIER_VERSION,
@@ -38,8 +41,11 @@ from pin_match.matchers.verify import (
     read_verifier,
     verdict,
 )
-from pin_match.scoring.cache import cache_dir, read_meta
-from pin_match.scoring.schema import encode_meta
+from pin_match.scoring.api import run_jobs
+from pin_match.scoring.cache import Shard
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
+from pin_match.scoring.product import Job, Product
+from pin_match.scoring.schema import as_stored
 
 ON_TARGET_SHARE = 0.5  # of the target's visible pixels inside the box ...
 TARGET_FILL = 0.25     # ... or of the box covered by the target
@@ -62,62 +68,65 @@ def on_target(box: Sequence[int], target: np.ndarray) -> bool:
     return inside >= ON_TARGET_SHARE * total or inside >= TARGET_FILL * max((x1 - x0) * (y1 - y0), 1)
 
 
-def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, out: str | Path = outputs.FEATURES, batch_size: int = 4,
-                    progress: bool = False) -> pd.DataFrame:
-    """One row per candidate of every frame of ``fs``: its box, whether it is on the target (and ``cover``, the
-    share of the target's pixels inside the box), its signals.
+@dataclass(frozen=True)
+class CandidateSignals(Product):
+    """``verify``'s candidates of every frame with their signals: a per-frame product of the scoring engine.
 
-    Cached by the score cache's folder rule, ``cache_dir(out, "verify-signals@<signals_id>",
-    fingerprint)``, one file per set of splits (a split of a frame-set keeps the whole set's
-    fingerprint, so it reads the whole set's file). A file counts when its metadata names this
-    signals id and frame-set and it holds the signals asked for and every episode; a damaged
-    file or another's is not a hit, and is computed again.
+    One row per candidate: its frame, box, whether it is on the target (and ``cover``, the share
+    of the target's pixels inside the box) and one column per signal of ``signals``. Its cache
+    folder hashes the matcher's ``signals_id`` with the signals computed, so an ablation's fits
+    (subsets of them) and every evaluation read one table.
     """
-    folder = cache_dir(out, f"verify-signals@{matcher.signals_id}", fs.fingerprint)
-    episodes = set(fs.episodes.episode_id)
-    for found in sorted(folder.glob("candidates_*.parquet")):  # this set, or the whole set it is a split of
-        meta = read_meta(found) or {}
-        if (meta.get("signals_id"), meta.get("frameset_fingerprint")) == (matcher.signals_id, fs.fingerprint) \
-                and set(matcher.cfg.signals) <= set(meta["signals"]) and episodes <= set(meta["episodes"]):
-            table = pd.read_parquet(found)
-            return table[table.episode_id.isin(episodes)].reset_index(drop=True)
-    table = compute_candidates(fs, matcher, batch_size, progress)
-    store_candidates(fs, matcher, table, out)
-    return table
+
+    signals: tuple[str, ...] = DEFAULT_SIGNALS
+    prefix: ClassVar[str] = "candidates"
+
+    def folder(self, matcher: VerifyMatcher) -> str:
+        payload = json.dumps([matcher.signals_id, list(self.signals)])
+        return f"verify-signals@{hashlib.sha256(payload.encode()).hexdigest()[:12]}"
+
+    def compute(self, matcher: VerifyMatcher, images: list[np.ndarray]) -> list[Any]:
+        return matcher.candidate_signals(images)
+
+    def frames_in_parallel(self, matcher: VerifyMatcher) -> bool:
+        return False
+
+    def rows(self, fs: FrameSet, episode: Any, frame_ids: list[str], steps: np.ndarray,
+             results: list[Any]) -> pd.DataFrame:
+        rows = []
+        for frame_id, found in zip(frame_ids, results):
+            target = fs.object_pixels(frame_id, episode.target_object_id)
+            for k, (cand, signals) in enumerate(found):
+                rows.append(dict(frame_id=frame_id, episode_id=episode.episode_id, split=str(episode.split),
+                                 candidate=k, x0=cand.box[0], y0=cand.box[1], x1=cand.box[2], y1=cand.box[3],
+                                 on_target=on_target(cand.box, target), cover=target_share(cand.box, target),
+                                 **{s: signals[s] for s in self.signals}))
+        return pd.DataFrame(rows, columns=self.schema().names)
+
+    def schema(self) -> Any:
+        return pa.schema([(c, pa.large_string()) for c in ("frame_id", "episode_id", "split")]
+                         + [(c, pa.int64()) for c in ("candidate", "x0", "y0", "x1", "y1")]
+                         + [("on_target", pa.bool_()), ("cover", pa.float64())]
+                         + [(s, pa.float64()) for s in self.signals])
+
+    def meta(self, matcher: VerifyMatcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
+        return as_stored(dict(kind="verify candidate signals", signals_id=matcher.signals_id,
+                              signals=list(self.signals), frameset_fingerprint=fs.fingerprint,
+                              frameset_name=fs.manifest.get("name", ""), split=split or "all",
+                              shard=str(shard) if shard else None, pin_match_version=pin_match.__version__))
 
 
-def store_candidates(fs: FrameSet, matcher: VerifyMatcher, table: pd.DataFrame, out: str | Path) -> Path:
-    """Write ``fs``'s candidate table where ``candidate_table`` finds it, with the metadata it checks."""
-    signals = [s for s in SIGNALS if s in table.columns]
-    meta = dict(kind="verify candidate signals", signals_id=matcher.signals_id, signals=signals,
-                frameset_fingerprint=fs.fingerprint, frameset_name=fs.manifest.get("name", ""),
-                episodes=sorted(set(fs.episodes.episode_id)), pin_match_version=pin_match.__version__)
-    stored = pa.Table.from_pandas(table, preserve_index=False)
-    stored = stored.replace_schema_metadata({**(stored.schema.metadata or {}), **encode_meta(meta)})
-    path = cache_dir(out, f"verify-signals@{matcher.signals_id}", fs.fingerprint) \
-        / f"candidates_{'+'.join(sorted(set(fs.episodes.split)))}.parquet"
-    atomic.write_parquet(path, stored)
-    return path
+def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, split: str | None = None,
+                    out: str | Path = outputs.FEATURES, run: RunOptions = DEFAULT_RUN) -> pd.DataFrame:
+    """The candidates of every frame of ``split`` with the matcher's signals (``CandidateSignals``).
 
-
-def compute_candidates(fs: FrameSet, matcher: VerifyMatcher, batch_size: int, progress: bool) -> pd.DataFrame:
-    """``candidate_table``'s rows, computed: every episode's frames through ``candidate_signals``."""
-    rows = []
-    for n, episode in enumerate(fs.episodes.itertuples(), 1):
-        matcher.prepare(fs.target(episode.target_object_id))
-        frames = fs.frames[fs.frames.episode_id == episode.episode_id]
-        for start in range(0, len(frames), batch_size):
-            ids = list(frames.frame_id.iloc[start:start + batch_size])
-            for frame_id, found in zip(ids, matcher.candidate_signals([fs.image(f) for f in ids])):
-                target = fs.object_pixels(frame_id, episode.target_object_id)
-                for k, (cand, signals) in enumerate(found):
-                    rows.append(dict(frame_id=frame_id, episode_id=episode.episode_id, split=episode.split,
-                                     candidate=k, x0=cand.box[0], y0=cand.box[1], x1=cand.box[2], y1=cand.box[3],
-                                     on_target=on_target(cand.box, target), cover=target_share(cand.box, target),
-                                     **signals))
-        if progress:
-            print(f"verify signals: {fs.root.name} episode {n}/{len(fs.episodes)}", file=sys.stderr)
-    return pd.DataFrame(rows)
+    Computed by the scoring engine into ``cache_dir(out, "verify-signals@<hash>", fingerprint)``:
+    per-episode chunks (a killed run resumes), Dask with ``run.client``, the progress bar, and
+    the score cache's rule (a table counts when its metadata is this run's).
+    """
+    product = CandidateSignals(tuple(matcher.cfg.signals))
+    (path,) = run_jobs(fs, [Job(matcher, product)], split=split, out=out, run=run)
+    return pd.read_parquet(path)
 
 
 def candidate_classes(table: pd.DataFrame, labels: pd.DataFrame) -> tuple[pd.DataFrame, np.ndarray, dict[str, int]]:
@@ -158,7 +167,7 @@ def fit_weights(used: pd.DataFrame, weights: np.ndarray, signals: Sequence[str],
 
 def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *, split: str = "train",
                  overrides: dict[str, Any] | None = None, out: str | Path = outputs.FEATURES, l2: float = 1.0,
-                 progress: bool = False) -> dict[str, Any]:
+                 run: RunOptions = DEFAULT_RUN) -> dict[str, Any]:
     """Fit the signals' weights on ``split`` of every frame-set together and write the verifier file (atomically).
 
     ``overrides`` configure the ``verify`` matcher (``signals`` leaves some out, for an ablation);
@@ -166,24 +175,37 @@ def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *
     are ``fit_weights``': the colour weight and the colour penalty's slope are never negative.
     """
     matcher = create_matcher("verify", **(overrides or {}))
+    sets = [item if isinstance(item, FrameSet) else FrameSet.load(item) for item in framesets]
+    tables = [candidate_table(fs, matcher, split=split, out=out, run=run) for fs in sets]
+    spec = fit_spec(matcher, [(fs, frame_labels(fs), table) for fs, table in zip(sets, tables)], split, l2)
+    atomic.write_json(path, spec)
+    read_verifier(Path(path))  # what was written is what the matcher accepts
+    return spec
+
+
+def fit_spec(matcher: VerifyMatcher, sets: Sequence[tuple[FrameSet, pd.DataFrame, pd.DataFrame]], split: str,
+             l2: float) -> dict[str, Any]:
+    """The verifier file of ``matcher``'s signals and colour gate, fitted on ``split`` of each (frame-set, its
+    labels, a candidate table holding those signals); a FitError when there is nothing to fit on."""
+    if not sets:
+        raise FitError("verifier fit: no frame-set to fit on")
     tables, labels, sources = [], [], []
-    for i, item in enumerate(framesets):
-        fs = item if isinstance(item, FrameSet) else FrameSet.load(item)
-        table = candidate_table(fs, matcher, out=out, progress=progress)
+    for i, (fs, fs_labels, table) in enumerate(sets):
         # two variants of one source share frame ids: the set's position keeps them apart
         tables.append(table[table.split == split].assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
-        labels.append(frame_labels(fs).assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
+        labels.append(fs_labels.assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
         sources.append(dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint))
-    used, weights, counts = candidate_classes(pd.concat(tables, ignore_index=True), pd.concat(labels))
-    spec = dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
+    candidates = pd.concat(tables, ignore_index=True)
+    if candidates.empty:
+        roots = ", ".join(str(fs.root) for fs, _, _ in sets)
+        raise FitError(f"verifier fit: no candidate in split {split!r} of {roots}")
+    used, weights, counts = candidate_classes(candidates, pd.concat(labels))
+    return dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
                 **fit_weights(used, weights, matcher.cfg.signals, matcher.cfg.color_gate, l2),
                 fitted_on=dict(framesets=sources, split=split, candidates=len(used), classes=counts, l2=l2,
                                objective="weighted logistic regression, candidate on the target vs candidates of "
                                          "frames without it; target, same-category and other classes weigh the "
                                          "same"))
-    atomic.write_json(path, spec)
-    read_verifier(Path(path))  # what was written is what the matcher accepts
-    return spec
 
 
 def frame_scores(table: pd.DataFrame, spec: dict[str, Any]) -> pd.DataFrame:

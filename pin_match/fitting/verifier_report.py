@@ -13,8 +13,8 @@ cosine is ``effnet``'s frame score.
 
 from __future__ import annotations
 
-import tempfile
 from collections.abc import Sequence
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -23,23 +23,31 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.evaluator import EvalContext
 from pin_match.evaluation.intervals import bootstrap_ci, instance_clusters
-from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.labels import scored_frames
 from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, detection_metrics, frame_arrays, ranking_metrics
 from pin_match.evaluation.paired import paired_comparison
 from pin_match.evaluation.tuning import sigma_for
-from pin_match.fitting.verifier import candidate_table, fit_verifier, frame_scores
-from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, verdict
+from pin_match.fitting.logistic import FitError
+from pin_match.fitting.verifier import candidate_table, fit_spec, frame_scores
+from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, VerifyMatcher, verdict
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
+from pin_match.scoring.table import ScoreTable
 
 
 def signal_sets(signals: Sequence[str] = SIGNALS) -> dict[str, dict]:
-    """The ablation's rows as ``verify`` overrides: the default, it without the colour gate, all signals, each alone,
-    each left out of all (a set without ``color`` has no gate)."""
-    sets = {"default": DEFAULT_SIGNALS, "all": tuple(signals)}
+    """The ablation's rows as ``verify`` overrides, all read from one table of ``signals``: the default (with and
+    without the colour gate) when ``signals`` hold it, all of them, each alone, each left out of all (a set without
+    ``color`` has no gate)."""
+    sets = {"default": DEFAULT_SIGNALS, "all": tuple(signals)} if set(DEFAULT_SIGNALS) <= set(signals) \
+        else {"all": tuple(signals)}
     sets.update({f"{s} alone": (s,) for s in signals})
-    sets.update({f"without {s}": tuple(x for x in signals if x != s) for s in signals})
+    if len(signals) > 1:
+        sets.update({f"without {s}": tuple(x for x in signals if x != s) for s in signals})
     rows = {label: dict(signals=s) if "color" in s else dict(signals=s, color_gate=0.0) for label, s in sets.items()}
-    rows["default, no gate"] = dict(signals=DEFAULT_SIGNALS, color_gate=0.0)
+    if "default" in sets:
+        rows["default, no gate"] = dict(signals=DEFAULT_SIGNALS, color_gate=0.0)
     return rows
 
 
@@ -51,15 +59,9 @@ def candidate_recall(table: pd.DataFrame, labels: pd.DataFrame, share: float = 0
     return float((best.reindex(sorted(target_frames)).fillna(0.0) >= share).mean()) if target_frames else float("nan")
 
 
-def split_labels(fs: FrameSet, split: str | None) -> pd.DataFrame:
-    """``frame_labels`` of the split's frames (all of them for None): built once per set, scored many times."""
-    labels = frame_labels(fs)
-    return labels if split is None else labels[labels.split == split]
-
-
-def scored(labels: pd.DataFrame, scores: pd.DataFrame) -> pd.DataFrame:
-    """The labelled frames with their score."""
-    return labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
+def scored(labels: pd.DataFrame, scores: pd.DataFrame, name: str) -> pd.DataFrame:
+    """The labelled frames of ``scores``' frames with their score (``labels.scored_frames``' checks)."""
+    return scored_frames(labels, ScoreTable(scores, {"matcher_id": name}))
 
 
 def effnet_scores(table: pd.DataFrame) -> pd.DataFrame:
@@ -68,56 +70,86 @@ def effnet_scores(table: pd.DataFrame) -> pd.DataFrame:
     return pd.DataFrame({"frame_id": first.frame_id.to_numpy(), "score": first.proto.to_numpy()})
 
 
+@dataclass(frozen=True)
+class Sets:
+    """The report's frame-sets, keyed by the path as given (two folders of one name stay apart): the development
+    sets' train splits, the evaluation sets' (PATH:SPLIT; a development set without one: its val split), each
+    set's labels built once and each split's candidate table."""
+
+    train: dict[str, tuple[FrameSet, pd.DataFrame, pd.DataFrame]]
+    evals: dict[str, tuple[FrameSet, pd.DataFrame, pd.DataFrame]]
+
+    @classmethod
+    def load(cls, train: Sequence[str], evals: Sequence[str], base: VerifyMatcher, features: str | Path,
+             run: RunOptions) -> Sets:
+        contexts: dict[str, EvalContext] = {}
+
+        def one(path: str, split: str | None) -> tuple[FrameSet, pd.DataFrame, pd.DataFrame]:
+            ctx = contexts.setdefault(path, EvalContext(FrameSet.load(path)))
+            fs = ctx.fs.split(split)
+            labels = ctx.labels if split is None else ctx.labels[ctx.labels.split == split]
+            return fs, labels, candidate_table(fs, base, out=features, run=run)
+
+        if not train:
+            raise FitError("verifier report: no development frame-set to fit and tune on (--train)")
+        dev = {str(p): one(str(p), "train") for p in train}
+        evaluated = {}
+        for item in evals:
+            path, _, split = str(item).partition(":")
+            evaluated[str(item)] = one(path, split or ("val" if path in dev else None))
+        return cls(dev, evaluated)
+
+
 def report(train: Sequence[str], evals: Sequence[str], features: str | Path = outputs.FEATURES,
-           boot: Bootstrap = DEFAULT_BOOT) -> dict:
-    """Every signal set and ``effnet`` on every evaluation set (val split where it has one, else all frames)."""
-    train_sets = [FrameSet.load(p).split("train") for p in train]
-    eval_sets = {}
-    for item in evals:
-        path, _, split = item.partition(":")
-        eval_sets[Path(path).name] = FrameSet.load(path).split(split or None)
-    base = create_matcher("verify")
-    tables = {name: candidate_table(fs, base, out=features) for name, fs in
-              {**{Path(p).name: fs for p, fs in zip(train, train_sets)}, **eval_sets}.items()}
-    rows, sigmas = [], {}
-    with tempfile.TemporaryDirectory() as tmp:
-        specs = {label: fit_verifier(train_sets, Path(tmp) / "v.json", overrides=overrides, out=features)
-                 for label, overrides in signal_sets().items()}
+           boot: Bootstrap = DEFAULT_BOOT, signals: Sequence[str] = DEFAULT_SIGNALS,
+           run: RunOptions = DEFAULT_RUN) -> dict:
+    """Every signal set of ``signals`` and ``effnet`` on every evaluation set, fitted and tuned on the development
+    sets' train splits; the candidate signals are computed once (``candidate_table``) and every row reads them.
+    ``sets`` in the result are the frame-sets, labels and candidate tables read (``Sets``)."""
+    base = create_matcher("verify", **signal_sets(signals)["all"])
+    sets = Sets.load(train, evals, base, features, run)
+    specs = {label: fit_spec(create_matcher("verify", **overrides), list(sets.train.values()), "train", 1.0)
+             for label, overrides in signal_sets(signals).items()}
     scorers = {"effnet": effnet_scores, **{f"verify {label}": (lambda t, s=spec: frame_scores(t, s))
                                            for label, spec in specs.items()}}
-    dev_names = [Path(p).name for p in train]
-    dev_labels = [split_labels(fs, "train") for fs in train_sets]
-    eval_labels = {name: split_labels(fs, "val" if name in dev_names else None) for name, fs in eval_sets.items()}
-    clusters = {name: instance_clusters(fs.episodes) for name, fs in eval_sets.items()}
+    clusters = {name: instance_clusters(fs.episodes) for name, (fs, _, _) in sets.evals.items()}
+    rows, sigmas = [], {}
     for name, score_of in scorers.items():
-        dev = pd.concat([scored(labels, score_of(tables[set_name])).assign(  # variants share ids
+        dev = pd.concat([scored(labels, score_of(table), name).assign(  # variants share ids
             frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
-            for i, (set_name, labels) in enumerate(zip(dev_names, dev_labels))])
+            for i, (_, labels, table) in enumerate(sets.train.values())])
+        if dev.empty:
+            raise FitError(f"verifier report: the development sets' train splits ({', '.join(sets.train)}) hold no "
+                           "frame to tune sigma on")
         sigmas[name] = sigma_for(dev)
-        for set_name, labels in eval_labels.items():
-            frames = scored(labels, score_of(tables[set_name]))
-            arrays = frame_arrays(frames)
-            low, high = bootstrap_ci(arrays, sigmas[name], clusters=clusters[set_name], boot=boot)["auroc_same"] \
-                or (np.nan, np.nan)
-            own = sigma_for(frames)  # the set's own best sigma, to see what the development sigma gives up
-            at, at_own = detection_metrics(arrays, sigmas[name]), detection_metrics(arrays, own)
-            ranking = ranking_metrics(arrays)
-            rows.append(dict(matcher=name, set=set_name, auroc_same=ranking["auroc_same"], low=low, high=high,
-                             auroc=ranking["auroc_target"], sigma=sigmas[name],
-                             tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"],
-                             first_precision=at["first_match_precision"], own_sigma=own,
-                             own_cm=at_own["cm_pct"], own_first_precision=at_own["first_match_precision"]))
+        for set_name, (_, labels, table) in sets.evals.items():
+            rows.append(_row(name, set_name, scored(labels, score_of(table), name), sigmas[name], clusters[set_name],
+                             boot))
     paired = {}
-    for set_name, labels in eval_labels.items():
-        a = scored(labels, effnet_scores(tables[set_name]))
-        b = scored(labels, frame_scores(tables[set_name], specs["default"]))
-        diff = paired_comparison(a, b, sigmas["effnet"], sigmas["verify default"], names=("effnet", "verify"),
+    default = "verify default" if "default" in specs else "verify all"
+    for set_name, (_, labels, table) in sets.evals.items():
+        a = scored(labels, effnet_scores(table), "effnet")
+        b = scored(labels, scorers[default](table), default)
+        diff = paired_comparison(a, b, sigmas["effnet"], sigmas[default], names=("effnet", "verify"),
                                  clusters=clusters[set_name], boot=boot).loc["AUROC-same"]
         paired[set_name] = dict(diff=float(diff["verify - effnet"]), low=float(diff["CI low"]),
                                 high=float(diff["CI high"]))
-    recall = {name: candidate_recall(tables[name], labels) for name, labels in eval_labels.items()
-              if "cover" in tables[name]}
-    return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs, candidate_recall=recall)
+    recall = {name: candidate_recall(table, labels) for name, (_, labels, table) in sets.evals.items()}
+    return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs, candidate_recall=recall, sets=sets)
+
+
+def _row(name: str, set_name: str, frames: pd.DataFrame, sigma: float, clusters: dict, boot: Bootstrap) -> dict:
+    """One matcher on one evaluation set: AUROC-same with its interval, TM / CM at the development sigma and what
+    the set's own best sigma would give."""
+    arrays = frame_arrays(frames)
+    low, high = bootstrap_ci(arrays, sigma, clusters=clusters, boot=boot)["auroc_same"] or (np.nan, np.nan)
+    own = sigma_for(frames)
+    at, at_own = detection_metrics(arrays, sigma), detection_metrics(arrays, own)
+    ranking = ranking_metrics(arrays)
+    return dict(matcher=name, set=set_name, auroc_same=ranking["auroc_same"], low=low, high=high,
+                auroc=ranking["auroc_target"], sigma=sigma, tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"],
+                first_precision=at["first_match_precision"], own_sigma=own, own_cm=at_own["cm_pct"],
+                own_first_precision=at_own["first_match_precision"])
 
 
 def candidate_lines(cands: pd.DataFrame, spec: dict) -> tuple[list[float], list[str]]:
@@ -133,17 +165,18 @@ def candidate_lines(cands: pd.DataFrame, spec: dict) -> tuple[list[float], list[
     return probabilities, lines
 
 
-def candidates_figure(fs: FrameSet, table: pd.DataFrame, spec: dict, path: str | Path, per_row: int = 6) -> Path:
+def candidates_figure(fs: FrameSet, labels: pd.DataFrame, table: pd.DataFrame, spec: dict, path: str | Path,
+                      per_row: int = 6) -> Path:
     """What the verifier decided and why, as a picture: the highest-scoring look-alike frames over the lowest-scoring
     target frames, each with every candidate box numbered (white: the best; grey: the others) and, under the frame,
     each candidate's probability and signals; the objects' masks outlined in their roles' colours and the target's
-    first reference in the corner."""
+    first reference in the corner. ``labels``: ``fs``'s frame labels, of the frames ``table`` holds."""
     import cv2
     import matplotlib.pyplot as plt
 
     from pin_match.evaluation.gallery import draw_frame, on_checkerboard, thumbnail
 
-    frames = scored(frame_labels(fs), frame_scores(table, spec))
+    frames = scored(labels, frame_scores(table, spec), "verify")
     same = frames[frames.same_visible & ~frames.target_visible].nlargest(per_row, "score")
     target = frames[frames.target_visible].nsmallest(per_row, "score")
     fig, axes = plt.subplots(2, per_row, figsize=(2.8 * per_row, 11.0), squeeze=False)

@@ -7,6 +7,9 @@ written atomically, so a killed run resumes where it stopped, two processes can 
 cache, and the final table is the concatenation of the chunks in episode order: the
 same bytes whether the run was interrupted or not.
 
+Several matchers (or other per-frame products, ``product``) are scored in one pass
+(``run_jobs``): each frame decoded once, a shared part run once, each job into its own table.
+
 The episodes run either here (threads decode ahead of the matcher) or, given a Dask
 ``client``, a few per task on a cluster (``pin_match.scoring.cluster``); both write the same
 chunk files and end in the same ``assemble``, so either path resumes the other's run.
@@ -15,15 +18,18 @@ chunk files and end in the same ``assemble``, so either path resumes the other's
 from __future__ import annotations
 
 import os
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 from pin_match import atomic, outputs
 from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.cache import Shard, assemble, cache_dir, read_meta, table_meta, table_name
+from pin_match.scoring.cache import Shard, assemble, cache_dir, read_meta, table_name
+from pin_match.scoring.episode import Output
 from pin_match.scoring.local import score_here
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
+from pin_match.scoring.product import Job
 from pin_match.scoring.schema import chunk_path
 from pin_match.scoring.table import ScoreTable
 
@@ -48,42 +54,81 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
     ``shard`` ("K/N") scores one part of the episodes. With ``run.client`` (a ``distributed.Client``)
     the episodes are scored on its cluster, into the same cache and the same table bytes.
     """
-    fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(matcher, str):
         matcher = create_matcher(matcher, **(overrides or {}))
+    return run_jobs(frameset, [Job(matcher)], split=split, out=out, shard=shard, run=run)[0]
+
+
+def score_many(frameset: FrameSet | str | Path, matchers: Mapping[str, dict] | Sequence[Matcher | str], *,
+               split: str | None = None, out: str | Path = outputs.SCORES,
+               run: RunOptions = DEFAULT_RUN) -> list[ScoreTable]:
+    """Several matchers' tables from one pass over the frames (``run_jobs``): the tables each alone would give.
+
+    ``matchers``: matchers or names, or a mapping of name to config overrides.
+    """
+    built = [create_matcher(name, **(cfg or {})) for name, cfg in matchers.items()] if isinstance(matchers, Mapping) \
+        else [create_matcher(m) if isinstance(m, str) else m for m in matchers]
+    return [ScoreTable.read(p) for p in run_jobs(frameset, [Job(m) for m in built], split=split, out=out, run=run)]
+
+
+def run_jobs(frameset: FrameSet | str | Path, jobs: Sequence[Job], *, split: str | None = None,
+             out: str | Path = outputs.SCORES, shard: Shard | str | None = None,
+             run: RunOptions = DEFAULT_RUN) -> list[Path]:
+    """Every job's table of ``split`` (found in the cache, or computed in one pass over the frames); their paths.
+
+    The jobs without a current table are run together: each frame is decoded once and handed to
+    each of them, and a part several matchers share runs once (``contract.shared``), so ``verify``
+    and ``effnet`` together cost little more than ``verify``. Each job's table lives at
+    ``cache_dir(out, product.folder(matcher), fingerprint)`` and is the same bytes as the job
+    run alone. Two jobs of one matcher and product are one job.
+    """
+    fs = frameset if isinstance(frameset, FrameSet) else FrameSet.load(frameset)
     if isinstance(shard, str):
         shard = Shard.parse(shard)
+    if split in (None, "all"):  # a view of one split is that split: its table must not pass for the whole set's
+        split = fs.split_name
     part = fs.split(split)
     episode_ids = list(part.episodes.episode_id)
     if shard is not None:
         episode_ids = shard.select(episode_ids)
-    root = cache_dir(out, matcher.id, fs.fingerprint)
-    final = root / table_name(split, shard)
-    meta = table_meta(matcher, fs, split, shard)
-    if final.exists() and read_meta(final) == meta:
-        return final
-    chunks = atomic.ensure_dir(root / "chunks")
-    with _progress(part, episode_ids, run.progress, matcher) as bar:
+    finals, todo = [], {}
+    for job in jobs:
+        root = cache_dir(out, job.product.folder(job.matcher), fs.fingerprint)
+        final = root / table_name(split, shard, job.product.prefix)
+        meta = job.product.meta(job.matcher, fs, split, shard)
+        finals.append(final)
+        if not (final.exists() and read_meta(final) == meta) and final not in todo:
+            todo[final] = (job, Output(job.product, atomic.ensure_dir(root / "chunks")), meta)
+    if todo:
+        _run(part, list(todo.values()), episode_ids, run)
+        for final, (job, output, meta) in todo.items():
+            assemble(final, [chunk_path(output.chunks, e) for e in sorted(episode_ids)], meta,
+                     job.product.schema())
+    return finals
+
+
+def _run(part: FrameSet, todo: list[tuple[Job, Output, dict]], episode_ids: list[str], run: RunOptions) -> None:
+    matchers = [job.matcher for job, _, _ in todo]
+    outputs = [output for _, output, _ in todo]
+    with _progress(part, episode_ids, run.progress, matchers) as bar:
         if run.client is not None:
             from pin_match.scoring.cluster import score_episodes
 
-            score_episodes(run.client, part, matcher, episode_ids, chunks, run.batch_size, bar)
+            score_episodes(run.client, part, matchers, outputs, episode_ids, run.batch_size, bar)
         else:
-            score_here(part, matcher, episode_ids, chunks, run.batch_size,
+            score_here(part, matchers, outputs, episode_ids, run.batch_size,
                        run.workers or min(2, os.cpu_count() or 1), bar)
-    assemble(final, [chunk_path(chunks, e) for e in sorted(episode_ids)], meta)
-    return final
 
 
 class _progress:
     """A tqdm bar in frames with the rate in frames per second (silent when disabled)."""
 
-    def __init__(self, fs: FrameSet, episode_ids: list[str], enabled: bool, matcher: Matcher) -> None:
+    def __init__(self, fs: FrameSet, episode_ids: list[str], enabled: bool, matchers: list[Matcher]) -> None:
         from tqdm import tqdm
 
         total = int(fs.frames.episode_id.isin(episode_ids).sum())
-        self.bar = tqdm(total=total, unit="frame", desc=matcher.display_name, disable=not enabled,
-                        dynamic_ncols=True, smoothing=0.1)
+        self.bar = tqdm(total=total, unit="frame", desc="+".join(m.display_name for m in matchers),
+                        disable=not enabled, dynamic_ncols=True, smoothing=0.1)
 
     def __enter__(self):
         return self.bar

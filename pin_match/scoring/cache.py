@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -19,7 +20,7 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import COLUMNS, arrow_schema, as_stored, decode_meta
+from pin_match.scoring.schema import COLUMNS, arrow_schema, as_stored, decode_meta, encode_meta
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 
@@ -55,8 +56,9 @@ def cache_dir(root: str | Path, matcher_id: str, fingerprint: str) -> Path:
     return Path(root) / matcher_id / fingerprint
 
 
-def table_name(split: str | None, shard: Shard | None) -> str:
-    name = f"scores_{split or 'all'}"
+def table_name(split: str | None, shard: Shard | None, prefix: str = "scores") -> str:
+    """A table's file name: ``prefix`` is the product's (``scores``, or another per-frame product's)."""
+    name = f"{prefix}_{split or 'all'}"
     return f"{name}_shard{shard}.parquet" if shard else f"{name}.parquet"
 
 
@@ -88,14 +90,15 @@ def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard |
     return as_stored(meta)
 
 
-def assemble(final: Path, chunk_files: list[Path], meta: dict) -> None:
+def assemble(final: Path, chunk_files: list[Path], meta: dict, schema: Any = None) -> None:
     """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata.
 
-    The chunks have passed ``schema.chunk_rows`` (or were just written), so they hold the table's types.
+    The chunks have passed ``schema.chunk_rows`` (or were just written), so they hold ``schema``'s
+    types (the score table's by default).
     """
     import pyarrow.parquet as pq
 
-    schema = arrow_schema(meta)
+    schema = (schema if schema is not None else arrow_schema()).with_metadata(encode_meta(meta))
     with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
         for path in chunk_files:
             writer.write_table(pq.read_table(path).replace_schema_metadata(schema.metadata))

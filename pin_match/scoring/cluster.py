@@ -21,7 +21,7 @@ import contextlib
 import os
 import threading
 import warnings
-from collections.abc import Iterator
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,8 +30,7 @@ from typing import Any
 from pin_match.contract.matcher import Matcher, MatcherConfig
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.episode import PreparedMatcher, score_into_chunk
-from pin_match.scoring.schema import chunk_rows
+from pin_match.scoring.episode import Output, PreparedMatchers, score_into_chunks
 
 try:  # Dask is optional: without it this module still imports, and ``connect`` says what to install
     from distributed.diagnostics.plugin import WorkerPlugin
@@ -139,33 +138,33 @@ def _malloc_setting() -> str | None:
 TASKS_PER_WORKER = 4  # tasks queued per worker thread: enough for balancing, few enough to amortise round trips
 
 
-def score_episodes(client: Any, fs: FrameSet, matcher: Matcher, episode_ids: list[str], chunks: Path,
-                   batch_size: int, bar) -> None:
-    """Score every episode without a chunk file, a few episodes per task; returns when all chunks exist.
+def score_episodes(client: Any, fs: FrameSet, matchers: Sequence[Matcher], outputs: Sequence[Output],
+                   episode_ids: list[str], batch_size: int, bar) -> None:
+    """Score every episode that lacks a chunk of some job, a few episodes per task; returns when all chunks exist.
 
     The first task error stops the run: the remaining tasks are cancelled (chunks already
     written stay, so a rerun resumes) and the error is raised here, naming the episodes.
     """
-    chunks, root = Path(chunks).resolve(), Path(fs.root).resolve()
+    outputs = tuple(Output(out.product, Path(out.chunks).resolve()) for out in outputs)
+    root = Path(fs.root).resolve()
     todo = []
     for episode_id in episode_ids:
-        done = chunk_rows(chunks, episode_id)
-        if done is None:
+        if any(out.done(episode_id) is None for out in outputs):
             todo.append(episode_id)
         else:
-            bar.update(done)
+            bar.update(int((fs.frames.episode_id == episode_id).sum()))
     if not todo:
         return
     warn_slow_malloc(client)
-    spec = MatcherSpec.of(matcher)
-    setup = WorkerSetup(spec, str(root), fs.fingerprint)
+    specs = tuple(MatcherSpec.of(m) for m in matchers)
+    setup = WorkerSetup(specs, str(root), fs.fingerprint)
     threads = sum(client.nthreads().values()) or 1
-    token = _token(chunks, batch_size)
+    token = _token(outputs, batch_size)
     futures: dict = {}
     try:
         client.register_plugin(setup, name=setup.name)  # raises a worker's setup error, e.g. a missing frame-set
-        futures = {client.submit(_score_task, str(root), fs.fingerprint, spec, group, str(chunks), batch_size,
-                                 key=f"pin-match-{matcher.id}-{group[0]}-{len(group)}-{token}"): group
+        futures = {client.submit(_score_task, str(root), fs.fingerprint, specs, group, outputs, batch_size,
+                                 key=f"pin-match-{_ids(specs)}-{group[0]}-{len(group)}-{token}"): group
                    for group in task_groups(todo, fs.episodes.set_index("episode_id").target_object_id, threads)}
         _collect(futures, bar)
     finally:
@@ -213,66 +212,74 @@ def _named(episodes: list[str]) -> str:
     return ", ".join(repr(e) for e in episodes)
 
 
-def _token(chunks: Path, batch_size: int) -> str:
+def _token(outputs: tuple[Output, ...], batch_size: int) -> str:
     from dask.base import tokenize
 
-    return tokenize(str(chunks), batch_size)[:10]
+    return tokenize([str(out.chunks) for out in outputs], batch_size)[:10]
 
 
-def _score_task(root: str, fingerprint: str, spec: MatcherSpec, episode_ids: list[str], chunks: str,
-                batch_size: int) -> int:
+def _ids(specs: tuple[MatcherSpec, ...]) -> str:
+    return "+".join(spec.matcher_id for spec in specs)
+
+
+def _score_task(root: str, fingerprint: str, specs: tuple[MatcherSpec, ...], episode_ids: list[str],
+                outputs: tuple[Output, ...], batch_size: int) -> int:
     """On a worker: score the episodes into their chunk files; returns their frames.
 
     A sound chunk found is kept: written by an earlier try of this task, or by another run on the
     same cache. A damaged one was named by the client when it submitted the task, so not again here.
     """
     fs = _frameset(root, fingerprint)
-    with _MATCHERS.lease(spec) as prepared:
-        return sum(score_into_chunk(fs, prepared, Path(chunks), episode_id, batch_size=batch_size, say_why=False)
+    with _MATCHERS.lease(specs) as prepared:
+        return sum(score_into_chunks(fs, prepared, outputs, episode_id, batch_size=batch_size, say_why=False)
                    for episode_id in episode_ids)
 
 
 class _Matchers:
-    """Per worker process: built matchers of the current run's matcher id, lent to one task at a time.
+    """Per worker process: built matchers of the current run's matcher ids, lent to one task at a time.
 
-    The worker plugin fills it before the first task (one per worker thread); a task that finds
-    none free builds one. A new matcher id (the next run on a long-lived cluster) replaces them.
+    The worker plugin fills it before the first task (one set per worker thread); a task that finds
+    none free builds one. New matcher ids (the next run on a long-lived cluster) replace them.
     """
 
     def __init__(self) -> None:
         self._lock = threading.Lock()
-        self._matcher_id: str | None = None
-        self._free: list[PreparedMatcher] = []
+        self._ids: str | None = None
+        self._free: list[PreparedMatchers] = []
 
-    def fill(self, spec: MatcherSpec, count: int) -> None:
+    def fill(self, specs: tuple[MatcherSpec, ...], count: int) -> None:
         with self._lock:
-            self._switch(spec)
+            self._switch(specs)
             missing = count - len(self._free)
-        built = [PreparedMatcher(spec.build()) for _ in range(max(0, missing))]
-        self._give_back(spec, built)
+        built = [_build(specs) for _ in range(max(0, missing))]
+        self._give_back(specs, built)
 
     @contextmanager
-    def lease(self, spec: MatcherSpec) -> Iterator[PreparedMatcher]:
+    def lease(self, specs: tuple[MatcherSpec, ...]) -> Iterator[PreparedMatchers]:
         with self._lock:
-            self._switch(spec)
+            self._switch(specs)
             prepared = self._free.pop() if self._free else None
-        prepared = prepared or PreparedMatcher(spec.build())
+        prepared = prepared or _build(specs)
         try:
             yield prepared
         except BaseException:
             prepared.forget()
             raise
         finally:
-            self._give_back(spec, [prepared])
+            self._give_back(specs, [prepared])
 
-    def _switch(self, spec: MatcherSpec) -> None:
-        if self._matcher_id != spec.matcher_id:
-            self._matcher_id, self._free = spec.matcher_id, []
+    def _switch(self, specs: tuple[MatcherSpec, ...]) -> None:
+        if self._ids != _ids(specs):
+            self._ids, self._free = _ids(specs), []
 
-    def _give_back(self, spec: MatcherSpec, prepared: list[PreparedMatcher]) -> None:
+    def _give_back(self, specs: tuple[MatcherSpec, ...], prepared: list[PreparedMatchers]) -> None:
         with self._lock:
-            if self._matcher_id == spec.matcher_id:
+            if self._ids == _ids(specs):
                 self._free.extend(prepared)
+
+
+def _build(specs: tuple[MatcherSpec, ...]) -> PreparedMatchers:
+    return PreparedMatchers([spec.build() for spec in specs])
 
 
 _MATCHERS = _Matchers()
@@ -281,19 +288,19 @@ _FRAMESETS_LOCK = threading.Lock()
 
 
 class WorkerSetup(WorkerPlugin):
-    """A Dask worker plugin: load the frame-set and build a matcher per worker thread before the first task.
+    """A Dask worker plugin: load the frame-set and build the run's matchers per worker thread before the first task.
 
     Registered by the client for one run (a worker that joins during the run sets up too) and
-    unregistered at its end; its name carries the matcher id and the frame-set.
+    unregistered at its end; its name carries the matcher ids and the frame-set.
     """
 
-    def __init__(self, spec: MatcherSpec, root: str, fingerprint: str) -> None:
-        self.spec, self.root, self.fingerprint = spec, root, fingerprint
-        self.name = f"pin-match-setup-{spec.matcher_id}-{fingerprint}"
+    def __init__(self, specs: tuple[MatcherSpec, ...], root: str, fingerprint: str) -> None:
+        self.specs, self.root, self.fingerprint = specs, root, fingerprint
+        self.name = f"pin-match-setup-{_ids(specs)}-{fingerprint}"
 
     def setup(self, worker: Any) -> None:
         _frameset(self.root, self.fingerprint)
-        _MATCHERS.fill(self.spec, worker.state.nthreads)
+        _MATCHERS.fill(self.specs, worker.state.nthreads)
 
 
 def _frameset(root: str, fingerprint: str) -> FrameSet:

@@ -1,98 +1,128 @@
-"""One episode into its chunk: the per-episode step that the local runner and the Dask runner share.
+"""One episode into its chunks: the per-episode step that the local runner and the Dask runner share.
 
-The target is prepared once per episode (or kept from the previous episode of the same
-target), frames are decoded ahead of the matcher in a thread pool, and the rows come back
-in step order as the episode's chunk.
+A run scores one or more jobs (a matcher and its product, ``product.Job``) in one pass: each
+frame is decoded once, in a thread pool ahead of the matchers, and handed to every job, and a
+part that several matchers share (``verify``'s locate map is ``effnet``'s) runs once per batch
+(``contract.shared``). Each job's rows land in its own chunk file; an episode whose chunks all
+exist is not scored again, and one that lacks some is scored for those jobs only.
 """
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pandas as pd
 
-from pin_match.contract.matcher import Matcher, MatcherError, MatchResult
+from pin_match.contract.matcher import Matcher, MatcherError
+from pin_match.contract.shared import shared_pass
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.schema import chunk_rows, episode_rows, write_chunk
+from pin_match.scoring.product import Product
+from pin_match.scoring.schema import chunk_rows, write_chunk
 
 
-class PreparedMatcher:
-    """A matcher, the target it is prepared for, and the threads that decode frames ahead of it.
+@dataclass(frozen=True)
+class Output:
+    """Where a job's chunks go and what they hold."""
+
+    product: Product
+    chunks: Path
+
+    def done(self, episode_id: str, say_why: bool = True) -> int | None:
+        """The rows of the episode's sound chunk, or None when it must be scored (``schema.chunk_rows``)."""
+        return chunk_rows(self.chunks, episode_id, self.product.schema(), say_why=say_why)
+
+
+class PreparedMatchers:
+    """A run's matchers, the target each is prepared for, and the threads that decode frames ahead of them.
 
     A runner keeps one across episodes (the local runner one, a Dask worker one per thread), so
     consecutive episodes of one target, common in PIN, prepare it once. One episode at a time
-    uses it, because ``prepare`` changes the matcher. ``workers`` > 1 also matches a batch's
+    uses it, because ``prepare`` changes a matcher. ``workers`` > 1 also matches a batch's
     frames in parallel, for matchers that allow it.
     """
 
-    def __init__(self, matcher: Matcher, workers: int = 1) -> None:
-        self.matcher = matcher
+    def __init__(self, matchers: Sequence[Matcher], workers: int = 1) -> None:
+        self.matchers = list(matchers)
         self.workers = workers
-        self.target: str | None = None
+        self.targets: list[str | None] = [None] * len(self.matchers)
         self.pool = ThreadPoolExecutor(max_workers=max(2, workers))
 
-    def hold(self, fs: FrameSet, target_id: str) -> None:
-        if self.target != target_id:
-            self.target = None  # a failed prepare leaves nothing held
-            self.matcher.prepare(fs.target(target_id))
-            self.target = target_id
+    def hold(self, fs: FrameSet, target_id: str, which: Sequence[int]) -> None:
+        for i in which:
+            if self.targets[i] != target_id:
+                self.targets[i] = None  # a failed prepare leaves nothing held
+                self.matchers[i].prepare(fs.target(target_id))
+                self.targets[i] = target_id
 
     def forget(self) -> None:
-        """After a failed episode: the matcher may be half-prepared, so the next episode prepares again."""
-        self.target = None
+        """After a failed episode: a matcher may be half-prepared, so the next episode prepares again."""
+        self.targets = [None] * len(self.matchers)
 
-    def __enter__(self) -> PreparedMatcher:
+    def __enter__(self) -> PreparedMatchers:
         return self
 
     def __exit__(self, *exc) -> None:
         self.pool.shutdown()
 
 
-def score_into_chunk(fs: FrameSet, prepared: PreparedMatcher, chunks: Path, episode_id: str, *, batch_size: int,
-                     bar=None, say_why: bool = True) -> int:
-    """Score the episode into its chunk unless a sound chunk exists (``schema.chunk_rows``); returns its rows.
+def score_into_chunks(fs: FrameSet, prepared: PreparedMatchers, outputs: Sequence[Output], episode_id: str, *,
+                      batch_size: int, bar=None, say_why: bool = True) -> int:
+    """Score the episode for every job without a sound chunk and write their chunks; returns its frames.
 
-    ``bar`` counts frames, also those of a chunk found written.
+    ``bar`` counts frames once per episode, also when every chunk was found written.
     """
-    done = chunk_rows(chunks, episode_id, say_why=say_why)
-    if done is not None:
+    pending = [i for i, out in enumerate(outputs) if out.done(episode_id, say_why) is None]
+    n_frames = int((fs.frames.episode_id == episode_id).sum())
+    if not pending:
         if bar is not None:
-            bar.update(done)
-        return done
-    rows = score_episode(fs, prepared, episode_id, batch_size=batch_size, bar=bar)
-    write_chunk(chunks, episode_id, rows)
-    return len(rows)
+            bar.update(n_frames)
+        return n_frames
+    rows = score_episode(fs, prepared, [outputs[i].product for i in pending], episode_id, pending,
+                         batch_size=batch_size, bar=bar)
+    for i, part in zip(pending, rows):
+        write_chunk(outputs[i].chunks, episode_id, part, outputs[i].product.schema())
+    return n_frames
 
 
-def score_episode(fs: FrameSet, prepared: PreparedMatcher, episode_id: str, *, batch_size: int,
-                  bar=None) -> pd.DataFrame:
-    """One episode's rows, in the table's schema; ``bar`` counts frames."""
+def score_episode(fs: FrameSet, prepared: PreparedMatchers, products: Sequence[Product], episode_id: str,
+                  which: Sequence[int], *, batch_size: int, bar=None) -> list[pd.DataFrame]:
+    """The episode's rows for the matchers ``which`` (indices into ``prepared``), each by its product, in step
+    order; ``bar`` counts frames."""
     ep = fs.episode(episode_id)
     frames = fs.frames[fs.frames.episode_id == episode_id].sort_values("step")
-    prepared.hold(fs, ep.target_object_id)
-    matcher, pool, workers = prepared.matcher, prepared.pool, prepared.workers
+    prepared.hold(fs, ep.target_object_id, which)
+    pool = prepared.pool
     ids = list(frames.frame_id)
     batches = [ids[i:i + batch_size] for i in range(0, len(ids), batch_size)]
-    results: list[MatchResult] = []
+    results: list[list[Any]] = [[] for _ in which]
     # decoding runs ahead of matching in the pool, so it overlaps inference
     decoded = [pool.submit(lambda b=b: [fs.image(f) for f in b]) for b in batches[:2]]
-    parallel = matcher.parallel_frames and workers > 1
     for k in range(len(batches)):
         images = decoded[k].result()
         if k + 2 < len(batches):
             decoded.append(pool.submit(lambda b=batches[k + 2]: [fs.image(f) for f in b]))
-        try:
-            if parallel:
-                parts = np.array_split(np.arange(len(images)), min(workers, len(images)))
-                futures = [pool.submit(matcher.match_batch, [images[i] for i in p]) for p in parts if len(p)]
-                out = [r for f in futures for r in f.result()]
-            else:
-                out = matcher.match_batch(images)
-        except MatcherError as exc:
-            raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") from exc
-        results.extend(out)
+        with shared_pass():  # a part several matchers share runs once on this batch
+            for out, i, product in zip(results, which, products):
+                try:
+                    out.extend(_compute(prepared, i, product, images))
+                except MatcherError as exc:
+                    raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") \
+                        from exc
         if bar is not None:
             bar.update(len(images))
-    return episode_rows(episode_id, str(ep.split), ids, frames.step.to_numpy(), results)
+    steps = frames.step.to_numpy()
+    return [product.rows(fs, ep, ids, steps, out) for out, product in zip(results, products)]
+
+
+def _compute(prepared: PreparedMatchers, i: int, product: Product, images: list[np.ndarray]) -> list[Any]:
+    matcher, workers = prepared.matchers[i], prepared.workers
+    if not (product.frames_in_parallel(matcher) and workers > 1):
+        return product.compute(matcher, images)
+    parts = np.array_split(np.arange(len(images)), min(workers, len(images)))
+    futures = [prepared.pool.submit(product.compute, matcher, [images[j] for j in p]) for p in parts if len(p)]
+    return [r for f in futures for r in f.result()]

@@ -2,7 +2,8 @@
 
 One module, so that the runners that write chunks, the cache that assembles them and
 ``ScoreTable`` that reads the result cannot disagree. A chunk is one episode's rows in exactly
-the table's columns and types. A chunk that cannot be read, or whose columns or types differ
+the table's columns and types (the chunks of another per-frame product, ``product``, in its own
+schema, by the same rules). A chunk that cannot be read, or whose columns or types differ
 (a disk that filled up, a copy cut short, a file from another version), is damaged: its
 episode is scored again and the chunk replaced, so a damaged cache costs time, never a
 traceback and never a wrong table.
@@ -77,11 +78,12 @@ def as_stored(meta: dict) -> dict:
     return json.loads(encode_meta(meta)[META_KEY])
 
 
-def mismatch(schema: Any) -> str | None:
-    """Why an Arrow schema is not the table's (ignoring metadata), or None when it is."""
-    if schema.names != COLUMNS:
-        return f"columns {schema.names}, expected {COLUMNS}"
-    for field in arrow_schema():
+def mismatch(schema: Any, expected: Any = None) -> str | None:
+    """Why an Arrow schema is not ``expected`` (the score table's by default), ignoring metadata; None when it is."""
+    expected = expected if expected is not None else arrow_schema()
+    if schema.names != expected.names:
+        return f"columns {schema.names}, expected {expected.names}"
+    for field in expected:
         got = schema.field(field.name).type
         if got != field.type:
             return f"column {field.name} is {got}, expected {field.type}"
@@ -92,15 +94,15 @@ def chunk_path(chunks: Path, episode_id: str) -> Path:
     return Path(chunks) / f"{episode_id}.parquet"
 
 
-def write_chunk(chunks: Path, episode_id: str, rows: pd.DataFrame) -> None:
-    """Write the episode's rows atomically, in the table's types (replacing a damaged chunk)."""
+def write_chunk(chunks: Path, episode_id: str, rows: pd.DataFrame, schema: Any) -> None:
+    """Write the episode's rows atomically, in the types of ``schema`` (replacing a damaged chunk)."""
     import pyarrow as pa
 
     atomic.write_parquet(chunk_path(chunks, episode_id),
-                         pa.Table.from_pandas(rows[COLUMNS], schema=arrow_schema(), preserve_index=False))
+                         pa.Table.from_pandas(rows[schema.names], schema=schema, preserve_index=False))
 
 
-def chunk_rows(chunks: Path, episode_id: str, *, say_why: bool = True) -> int | None:
+def chunk_rows(chunks: Path, episode_id: str, schema: Any, *, say_why: bool = True) -> int | None:
     """The number of rows of the episode's chunk, or None when the episode must be scored.
 
     That is when there is no chunk, or a damaged one; with ``say_why`` a damaged chunk is named
@@ -117,7 +119,7 @@ def chunk_rows(chunks: Path, episode_id: str, *, say_why: bool = True) -> int | 
     except Exception as exc:  # pyarrow raises several kinds (ArrowInvalid, OSError, ...) on a damaged file
         problem = " ".join(str(exc).split()) or type(exc).__name__
     else:
-        problem = mismatch(table.schema)
+        problem = mismatch(table.schema, schema)
         if problem is None:
             return table.num_rows
     if say_why:

@@ -1,0 +1,65 @@
+"""What the scoring engine computes per frame: a matcher's scores, or another per-frame product a fit needs.
+
+A product says how a batch of frames becomes results (``compute``), how one episode's results
+become rows (``rows``), the columns and types of its chunks and tables (``schema``), where they
+live in the cache (``folder``, ``prefix``) and the metadata a table carries (``meta``). Everything
+else, per-episode chunks, resume after a kill, locks, Dask, the progress bar and the cache rule,
+is the engine's and the same for every product: ``pin_match.fitting.verifier``'s candidate
+signals are one, computed like any score table.
+
+A ``Job`` is one matcher and one product; a run scores several jobs in one pass over the frames
+(each frame decoded once, a part shared by several matchers run once: ``contract.shared``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+import pandas as pd
+
+from pin_match.contract.matcher import Matcher
+from pin_match.data.frameset import FrameSet
+from pin_match.scoring.cache import Shard, table_meta
+from pin_match.scoring.schema import arrow_schema, episode_rows
+
+
+@dataclass(frozen=True)
+class Product:
+    """A matcher's scores: one row per frame in the score table's columns (``schema.COLUMNS``)."""
+
+    prefix: ClassVar[str] = "scores"
+
+    def folder(self, matcher: Matcher) -> str:
+        """The cache folder's name for this matcher (``cache.cache_dir``'s middle part)."""
+        return matcher.id
+
+    def compute(self, matcher: Matcher, images: list[np.ndarray]) -> list[Any]:
+        return matcher.match_batch(images)
+
+    def frames_in_parallel(self, matcher: Matcher) -> bool:
+        """Whether ``compute`` may run on parts of a batch in several threads at once."""
+        return matcher.parallel_frames
+
+    def rows(self, fs: FrameSet, episode: Any, frame_ids: list[str], steps: np.ndarray,
+             results: list[Any]) -> pd.DataFrame:
+        """One episode's rows (``episode`` a row of ``fs.episodes``), in step order."""
+        return episode_rows(episode.episode_id, str(episode.split), frame_ids, steps, results)
+
+    def schema(self) -> Any:
+        return arrow_schema()
+
+    def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
+        return table_meta(matcher, fs, split, shard)
+
+
+SCORES = Product()
+
+
+@dataclass(frozen=True)
+class Job:
+    """One matcher and what the engine computes with it (its scores unless told otherwise)."""
+
+    matcher: Matcher
+    product: Product = SCORES
