@@ -214,9 +214,9 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
     out = capsys.readouterr().out
     breakdown = out[out.index("where the time went"):].splitlines()[1:]
     breakdown = breakdown[:breakdown.index("")]
-    assert [line.split()[0] for line in breakdown] == ["load", "score", "score", "tune", "compare", "index", "total"]
+    assert [line.split()[0] for line in breakdown] == ["load", "score", "tune", "compare", "index", "total"]
     assert breakdown[0].startswith("load frame-set (scanned look-alikes)")  # the copied set is kept, not rendered
-    assert "score color (scanned look-alikes, 8 frames)" in breakdown[1] and "score sift" in breakdown[2]
+    assert "score color + sift (scanned look-alikes, 8 frames, one pass)" in breakdown[1]  # scored together
     seconds = [float(re.search(r"\s(\d+\.\d) s", line).group(1)) for line in breakdown]
     assert seconds[-1] == pytest.approx(sum(seconds[:-1]), abs=0.2)  # each step printed rounded to 0.1 s
 

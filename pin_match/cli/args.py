@@ -1,7 +1,7 @@
 """Arguments several commands share, each defined once: a matcher's config, run options, a dataclass's fields.
 
 Every ``add_*`` has its reader (``matcher_overrides``, ``bench_overrides``, ``run_options``,
-``dataclass_values``), so a command never spells a shared flag or its default itself.
+``engine_run``, ``dataclass_values``), so a command never spells a shared flag or its default itself.
 """
 
 from __future__ import annotations
@@ -9,7 +9,9 @@ from __future__ import annotations
 import argparse
 import dataclasses
 import typing
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+from dataclasses import replace
 from typing import Any
 
 from pin_match.contract.matcher import ConfigError
@@ -66,6 +68,29 @@ def run_options(a: argparse.Namespace) -> RunOptions:
     """The ``RunOptions`` of ``add_run_options``; an option the command lacks keeps its default."""
     given = {name: getattr(a, name) for name in ("batch_size", "workers") if hasattr(a, name)}
     return RunOptions(**given, progress=not a.quiet)
+
+
+def add_scheduler(s: argparse.ArgumentParser) -> None:
+    """--scheduler and --scheduler-timeout, for a command whose per-frame work runs through the scoring engine."""
+    s.add_argument("--scheduler", metavar="local|ADDRESS",
+                   help="run the per-frame work on Dask distributed: 'local' starts --workers worker processes "
+                        "here; else a scheduler address (tcp://host:8786) or scheduler JSON file; same cache and "
+                        "tables")
+    s.add_argument("--scheduler-timeout", type=float, default=30.0, metavar="SECONDS",
+                   help="give up on an unreachable --scheduler after this long (default 30)")
+
+
+@contextmanager
+def engine_run(a: argparse.Namespace) -> Iterator[RunOptions]:
+    """``run_options(a)``, with a client of ``--scheduler``'s cluster when one is given (closed after the block)."""
+    run = run_options(a)
+    if not getattr(a, "scheduler", None):
+        yield run
+        return
+    from pin_match.scoring.cluster import connect
+
+    with connect(a.scheduler, workers=run.workers, timeout=a.scheduler_timeout) as client:
+        yield replace(run, client=client)
 
 
 def add_dataclass_flags(s: argparse.ArgumentParser, cls: type, choices: dict[str, Sequence[str]] | None = None) -> None:

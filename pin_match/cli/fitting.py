@@ -10,7 +10,7 @@ import argparse
 import json
 from pathlib import Path
 
-from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
+from pin_match.cli.args import add_matcher_config, add_run_options, add_scheduler, engine_run, matcher_overrides
 from pin_match.contract.matcher import ConfigError
 from pin_match.contract.registry import parse_overrides
 
@@ -31,8 +31,8 @@ def components(specs: list[list[str]]) -> list[tuple[str, dict[str, str], str]]:
 def _cmd_fusion(a: argparse.Namespace) -> None:
     from pin_match.fitting.fusion import fit_fusion
 
-    spec = fit_fusion(a.frameset, components(a.component), a.out, split=a.split, out=a.cache, l2=a.l2,
-                      run=run_options(a))
+    with engine_run(a) as run:
+        spec = fit_fusion(a.frameset, components(a.component), a.out, split=a.split, out=a.cache, l2=a.l2, run=run)
     terms = " ".join(f"{c['coef']:+.3g} {c['matcher']}" for c in spec["components"])
     print(f"fusion logit {spec['intercept']:.3g} {terms} on {spec['fitted_on']['frames']} frames "
           f"{spec['fitted_on']['classes']} -> {a.out}\n"
@@ -42,8 +42,9 @@ def _cmd_fusion(a: argparse.Namespace) -> None:
 def _cmd_verifier(a: argparse.Namespace) -> None:
     from pin_match.fitting.verifier import fit_verifier
 
-    spec = fit_verifier(a.framesets, a.out, split=a.split, overrides=matcher_overrides(a), out=a.features, l2=a.l2,
-                        run=run_options(a))
+    with engine_run(a) as run:
+        spec = fit_verifier(a.framesets, a.out, split=a.split, overrides=matcher_overrides(a), out=a.features,
+                            l2=a.l2, run=run)
     terms = " ".join(f"{c:+.3g} {s}" for s, c in spec["coefs"].items())
     print(f"verifier logit {spec['intercept']:.3g} {terms} on {spec['fitted_on']['candidates']} candidates "
           f"{spec['fitted_on']['classes']} -> {a.out}\n"
@@ -58,7 +59,8 @@ def _cmd_verifier_report(a: argparse.Namespace) -> None:
     from pin_match.fitting.verifier_report import candidates_figure, report
 
     signals = dict(signals=tuple(a.signals)) if a.signals else {}
-    result = report(a.train, a.eval, a.features, run=run_options(a), **signals)
+    with engine_run(a) as run:
+        result = report(a.train, a.eval, a.features, run=run, **signals)
     with pd.option_context("display.width", 200, "display.max_rows", 500):
         print(pd.DataFrame(result["rows"]).round(3).to_string(index=False))
     print(json.dumps(dict(sigmas=result["sigmas"], paired=result["paired"],
@@ -96,7 +98,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
         p.add_argument("--out", type=Path, required=True, help="the fitted JSON file to write")
         p.add_argument("--split", default="train", help="the split fitted on (default train)")
         p.add_argument("--l2", type=float, default=1.0, help="L2 penalty on the standardised features (default 1)")
-        add_run_options(p, workers=None, batch_size=False)
+        add_run_options(p, workers="threads decoding frames (default up to 2); with --scheduler local, worker "
+                                   "processes", batch_size=True)
+        add_scheduler(p)
     s.set_defaults(func=_cmd_fusion)
     v.set_defaults(func=_cmd_verifier)
 
@@ -109,7 +113,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     r.add_argument("--signals", nargs="+", metavar="SIGNAL",
                    help="the signals computed, the ablation's rows being their subsets (default: verify's default "
                         "signals; add keypoints for its rows, at 0.4x effnet's cost a frame)")
-    add_run_options(r, workers=None, batch_size=True)
+    add_run_options(r, workers="threads decoding frames (default up to 2); with --scheduler local, worker processes",
+                    batch_size=True)
+    add_scheduler(r)
     r.add_argument("--json", help="write the whole report here")
     r.add_argument("--figure", help="draw the first --eval set's decisions of the default verifier into this PNG")
     r.set_defaults(func=_cmd_verifier_report)

@@ -10,12 +10,18 @@ from __future__ import annotations
 
 import argparse
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 from pin_match import outputs
 from pin_match.cli import catalog, data, evaluation, fitting, pages, training
-from pin_match.cli.args import add_matcher_config, add_run_options, matcher_overrides, run_options
+from pin_match.cli.args import (
+    add_matcher_config,
+    add_run_options,
+    add_scheduler,
+    engine_run,
+    matcher_overrides,
+    run_options,
+)
 from pin_match.data.synth import SynthSize
 from pin_match.errors import PinMatchError
 
@@ -59,14 +65,9 @@ def _cmd_score(a: argparse.Namespace) -> None:
 
     from pin_match.scoring import read_meta, score_to_file
 
-    kwargs = dict(overrides=matcher_overrides(a), split=a.split, out=a.out, shard=a.shard, run=run_options(a))
-    if a.scheduler:
-        from pin_match.scoring.cluster import connect
-
-        with connect(a.scheduler, workers=a.workers, timeout=a.scheduler_timeout) as client:
-            path = score_to_file(a.frameset, a.matcher, **{**kwargs, "run": replace(kwargs["run"], client=client)})
-    else:
-        path = score_to_file(a.frameset, a.matcher, **kwargs)
+    with engine_run(a) as run:
+        path = score_to_file(a.frameset, a.matcher, overrides=matcher_overrides(a), split=a.split, out=a.out,
+                             shard=a.shard, run=run)
     s = pd.read_parquet(path, columns=["score"]).score
     summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
     print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
@@ -124,11 +125,7 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--shard", help="i/n: score a deterministic part (join the parts with `pin-match merge`)")
     add_run_options(s, workers="threads decoding and scoring frames (default up to 2); with --scheduler local, "
                                "worker processes")
-    s.add_argument("--scheduler", metavar="local|ADDRESS",
-                   help="score on Dask distributed: 'local' starts --workers worker processes here; else a "
-                        "scheduler address (tcp://host:8786) or scheduler JSON file; same cache and table")
-    s.add_argument("--scheduler-timeout", type=float, default=30.0, metavar="SECONDS",
-                   help="give up on an unreachable --scheduler after this long (default 30)")
+    add_scheduler(s)
     s.set_defaults(func=_cmd_score)
 
     s = sub.add_parser("merge", help="join shard score tables")

@@ -3,11 +3,11 @@
 The fusion matcher (``matchers/fusion.py``) only applies weights; fitting needs score tables
 and labels, which live above the matchers, so it is here. The components are scored through
 ``pin_match.scoring.score_many`` (one pass over the frames) with the usual cache (a table
-already there is read, never recomputed). Frames are the positives when the target is visible; the negatives are split by
-the metrics' frame classes into same-category look-alike frames and all other frames, and the
-three classes weigh the same in the loss (``labels.class_weights``). The file records the
-components (name, config, id), the frame-set's fingerprint and the split, so what a fusion was
-fitted on is never guessed."""
+already there is read, never recomputed). Frames are the positives when the target is
+visible; the negatives are split by the metrics' frame classes into same-category look-alike
+frames and all other frames, and the three classes weigh the same in the loss
+(``labels.class_weights``). The file records the components (name, config, id), the
+frame-set's fingerprint and the split, so what a fusion was fitted on is never guessed."""
 
 from __future__ import annotations
 
