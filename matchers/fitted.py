@@ -7,11 +7,11 @@ and reading it checks the format and version it declares before any matcher read
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from pin_match import atomic
 from pin_match.contract import WeightsError, WeightsSpec, content_digest
 
 
@@ -30,10 +30,7 @@ class FittedFileSpec(WeightsSpec):
 
 def read_fitted_file(path: Path, kind: str, fmt: str, version: int) -> dict[str, Any]:
     """A fitted JSON file of format ``fmt`` and ``version``: a WeightsError naming the ``kind`` file otherwise."""
-    try:
-        spec = json.loads(path.read_text())
-    except (OSError, ValueError) as exc:
-        raise WeightsError(f"{kind} file {path}: cannot read it as JSON ({exc})") from exc
+    spec = atomic.read_json(path, WeightsError, f"{kind} file")
     if not isinstance(spec, dict) or spec.get("format") != fmt or spec.get("version") != version:
         raise WeightsError(f"{kind} file {path}: not a {fmt} file of version {version}")
     return spec

@@ -2,13 +2,14 @@
 
 Every writer in pin_match goes through here: the bytes land in a temporary file in
 the destination folder and are renamed over the target only once complete, so a reader
-sees either the old file or the whole new one. ``read_json`` reads a JSON file back (one
-written here or by hand) with an error naming the file.
+sees either the old file or the whole new one. ``read_json`` is the one reader of JSON files
+(written here or by hand): every failure is the caller's error type, naming the file.
 """
 
 from __future__ import annotations
 
 import contextlib
+import gzip
 import json
 import os
 import tempfile
@@ -75,12 +76,22 @@ def write_json(path: str | os.PathLike, obj: Any) -> None:
     write_text(path, json.dumps(obj, indent=2, sort_keys=False, default=_json_default) + "\n")
 
 
-def read_json(path: Path, error: type[PinMatchError]) -> Any:
-    """The JSON value in ``path``, or ``error`` naming the file when its text is not UTF-8 JSON."""
+def read_json(path: str | os.PathLike, error: type[PinMatchError], what: str = "file") -> Any:
+    """The JSON value in ``path`` (gzip-compressed when it ends in ``.gz``), or ``error`` naming the file.
+
+    Every JSON file pin_match reads (its own outputs, a user's recording, a fitted file) comes through
+    here, so a missing, unreadable, truncated, non-UTF-8 or non-JSON file fails the same way: one line
+    saying what the file is (``what``, e.g. "thresholds file") and where, as the caller's own error type.
+    """
+    path = Path(path)
+    opener = gzip.open if path.suffix == ".gz" else open
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise error(f"{path} is not valid JSON: {exc}") from exc
+        with opener(path, "rt", encoding="utf-8") as fh:
+            return json.load(fh)
+    except FileNotFoundError:
+        raise error(f"missing {what} {path}") from None
+    except (OSError, EOFError, ValueError) as exc:  # unreadable, a damaged gzip stream, not UTF-8, not JSON
+        raise error(f"cannot read {what} {path} as JSON: {exc}") from exc
 
 
 def _json_default(obj: Any) -> Any:

@@ -53,6 +53,19 @@ def paint(image: np.ndarray, mask: np.ndarray, value: int, view: np.ndarray, x0:
     mask[y0:y0 + h, x0:x0 + w][alpha] = value
 
 
+@pytest.fixture
+def own_registry(monkeypatch):
+    """The matcher registry, built-ins imported, as a copy the test may change: its names are gone after it.
+
+    A built-in registers when its module is first imported, once per process: imported into a copy, it
+    would be missing from the real registry for every later test.
+    """
+    from pin_match.contract import registry
+
+    registry.available_names()
+    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+
+
 @pytest.fixture(scope="session")
 def tiny_frameset(tmp_path_factory):
     """2 episodes (train, val) x 4 frames, 640x360, with depth.

@@ -22,11 +22,10 @@ def test_shortest_matcher_in_the_docs_passes_the_contract():
     assert create_matcher("my-matcher").id.startswith("my-matcher@")
 
 
-def test_the_example_file_works_as_a_plug_in_and_is_no_built_in(monkeypatch):
+def test_the_example_file_works_as_a_plug_in_and_is_no_built_in(monkeypatch, own_registry):
     """examples/my_matcher.py, declared as a third-party package would (an entry point), passes the contract."""
-    assert "example-mean-color" not in registry.builtin_modules()
+    assert "example-mean-color" not in list_matchers()
     monkeypatch.syspath_prepend(str(ROOT / "examples"))
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # the name is gone after this test
     ep = EntryPoint(name="example-mean-color", value="my_matcher:MeanColorMatcher", group=registry.ENTRY_POINT_GROUP)
     monkeypatch.setattr(registry, "_entry_points", lambda: {ep.name: ep})
     assert "example-mean-color" in list_matchers("example-*")
@@ -35,8 +34,7 @@ def test_the_example_file_works_as_a_plug_in_and_is_no_built_in(monkeypatch):
     assert create_matcher("example-mean-color", grid=4).cfg.grid == 4
 
 
-def test_a_variant_in_the_docs_is_a_preset_of_the_first_matcher(monkeypatch):
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))  # the names are gone after this test
+def test_a_variant_in_the_docs_is_a_preset_of_the_first_matcher(own_registry):
     blocks = re.findall(r"```python\n(.*?)```", DOC.read_text(encoding="utf-8"), re.S)
     variant = next(b for b in blocks if "preset=" in b)
     namespace: dict = {}

@@ -5,6 +5,7 @@ from __future__ import annotations
 import importlib
 import pkgutil
 import re
+import subprocess
 import sys
 import textwrap
 import types
@@ -15,10 +16,9 @@ import pytest
 from toys import BrightMatcher, HandSet
 
 from pin_match import MatchResult, create_matcher, list_matchers, register_matcher
-from pin_match.contract import registry
+from pin_match.contract import discovery, registry
 from pin_match.contract.matcher import ConfigError, MatcherError
-from pin_match.contract.registry import UnknownMatcherError, parse_overrides
-from pin_match.contract.scan import RegistrationError, scan_package
+from pin_match.contract.registry import RegistrationError, UnknownMatcherError, parse_overrides
 
 
 def test_a_plug_in_from_outside_the_package_plugs_in(tiny_frameset):
@@ -65,161 +65,92 @@ def test_unknown_matcher_suggests_close_names():
 
 
 def test_builtins_resolve_without_importing_their_module_first():
-    for name in ("sift", "color"):
-        sys.modules.pop(f"pin_match.matchers.{name}", None)  # the module is named after its matcher
-        registry._REGISTRY.pop(name, None)
-        assert create_matcher(name).name == name
-    assert {"sift", "color", "dino", "dinov2", "clip", "clip-text", "superglue", "owl", "persam"} <= \
-        set(list_matchers())
+    """A fresh process: naming a built-in is enough, whatever was imported before."""
+    code = ("import sys; from pin_match import create_matcher, list_matchers; "
+            "assert 'pin_match.matchers.sift' not in sys.modules; print(create_matcher('sift').name); "
+            "print(' '.join(list_matchers()))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.splitlines()
+    assert out[0] == "sift"
+    assert {"sift", "color", "dino", "dinov2", "clip", "clip-text", "superglue", "owl", "persam", "verify"} <= \
+        set(out[1].split())
     assert list_matchers("clip*") == sorted(n for n in list_matchers() if n.startswith("clip"))
 
 
-def test_the_listed_built_ins_are_exactly_what_their_modules_register():
-    """Every module of the built-in package imported: what they register is what the scan listed, both ways."""
+def test_every_module_of_the_built_in_package_is_imported_and_registers():
+    """What the built-in package's modules register is what is listed: each listed class lives in one of them."""
     package = importlib.import_module(registry.BUILTIN_PACKAGE)
-    for info in pkgutil.iter_modules(package.__path__):
-        importlib.import_module(f"{registry.BUILTIN_PACKAGE}.{info.name}")
-    registered = {name: cls.__module__ for name, cls in registry._REGISTRY.items()
-                  if cls.__module__.startswith(f"{registry.BUILTIN_PACKAGE}.")}
-    assert registered == registry.builtin_modules()
-    assert {n: f"{c.__module__}.{c.__qualname__}" for n, c in registry._REGISTRY.items() if n in registered} == \
-        {n: r.dotted for n, r in registry.builtin_registrations().items()}
-    assert {"sift", "color", "effnet", "superglue", "ieve", "xfeat", "fusion", "learned"} <= set(registered)
+    modules = {info.name for info in pkgutil.walk_packages(package.__path__, f"{registry.BUILTIN_PACKAGE}.")}
+    listed = {name: registry.get_matcher_class(name).__module__ for name in list_matchers()}
+    built_in = {name: module for name, module in listed.items() if module.startswith(f"{registry.BUILTIN_PACKAGE}.")}
+    assert modules <= set(sys.modules) and set(built_in.values()) <= modules
+    assert {"sift", "color", "effnet", "superglue", "ieve", "xfeat", "fusion", "learned", "verify"} <= set(built_in)
 
 
 @pytest.fixture
-def scan(tmp_path, monkeypatch):
-    """Writes files into a package of its own and reads it as the registry reads the built-in folder."""
+def toy_builtins(tmp_path, monkeypatch):
+    """A package of the test's own stands in for the built-in folder, so the checkout is never written."""
     monkeypatch.syspath_prepend(str(tmp_path))
-    (tmp_path / "toy_builtins").mkdir()
-    (tmp_path / "toy_builtins" / "__init__.py").write_text("")
-
-    def write_and_scan(files: dict[str, str]) -> dict:
-        for name, text in files.items():
-            path = tmp_path / "toy_builtins" / name
-            path.parent.mkdir(exist_ok=True)
-            path.write_text(textwrap.dedent(text))
-        scan_package.cache_clear()
-        try:
-            return scan_package("toy_builtins")
-        finally:
-            scan_package.cache_clear()
-
-    write_and_scan.folder = tmp_path / "toy_builtins"
-    return write_and_scan
-
-
-def test_a_new_file_with_the_decorator_is_all_a_built_in_needs(scan, monkeypatch):
-    """The built-in folder stood in for by a package of the test's own, so the checkout is never written."""
     monkeypatch.setattr(registry, "BUILTIN_PACKAGE", "toy_builtins")
     monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    scan({"brand_new.py": """
-        from pin_match.contract import MatchResult, Matcher, register_matcher
+    monkeypatch.setattr(discovery, "_IMPORTED", set())
+    folder = tmp_path / "toy_builtins"
+    folder.mkdir()
+    (folder / "__init__.py").write_text("")
 
-        @register_matcher("brand-new")
-        class BrandNew(Matcher):
-            def _prepare(self, target):
-                pass
+    def write(files: dict[str, str]) -> None:
+        for name, text in files.items():
+            path = folder / name
+            path.parent.mkdir(exist_ok=True)
+            path.write_text(textwrap.dedent(text))
 
-            def _match_batch(self, images):
-                return [MatchResult(score=0.25) for _ in images]
-    """})
-    try:
-        assert list_matchers("brand-*") == ["brand-new"]
-        assert "toy_builtins.brand_new" not in sys.modules  # listed without importing it
-        assert create_matcher("brand-new").default_sigma == 0.5
-    finally:
-        scan_package.cache_clear()
-        sys.modules.pop("toy_builtins.brand_new", None)
-        sys.modules.pop("toy_builtins", None)
+    yield write
+    for module in [m for m in sys.modules if m == "toy_builtins" or m.startswith("toy_builtins.")]:
+        del sys.modules[module]
 
 
-@pytest.mark.parametrize("package, why", [("no_such_matchers_package", "not installed"),
-                                          ("no_such_parent.matchers", "not installed"),
-                                          ("json.decoder", "a module, not a package")])
-def test_the_scan_of_a_package_it_cannot_read_names_the_package(package, why):
-    """Issue 43.3c: the scan once returned no names at all, so a missing built-in package listed no matchers."""
-    scan_package.cache_clear()
-    try:
-        with pytest.raises(RegistrationError, match=rf"{re.escape(package)}.*{why}"):
-            scan_package(package)
-    finally:
-        scan_package.cache_clear()
+TOY = """
+    from pin_match.contract import MatchResult, Matcher, register_matcher as {decorator}
+
+    NAME = {name!r}
 
 
-def test_the_scan_reads_literal_decorators_and_ignores_mere_mentions(scan):
-    found = scan({"a.py": """
-        \"\"\"Mentions register_matcher in prose only.\"\"\"
-        from pin_match import contract
-        from pin_match.contract import register_matcher
-
-        @register_matcher("toy-a")
-        class A:
+    @{decorator}(NAME)
+    class {cls}(Matcher):
+        def _prepare(self, target):
             pass
 
-        @contract.register_matcher("toy-b")
-        class B:
-            pass
-    """})
-    assert {n: (r.module, r.qualname, r.line) for n, r in found.items()} == \
-        {"toy-a": ("toy_builtins.a", "A", 6), "toy-b": ("toy_builtins.a", "B", 10)}
-
-
-NAME_IN_A_VARIABLE = """
-    from pin_match.contract import register_matcher
-    NAME = "toy-a"
-
-    @register_matcher(NAME)
-    class A:
-        pass
-"""
-PLAIN_CALL = """
-    from pin_match.contract import register_matcher
-
-    class A:
-        pass
-
-    register_matcher("toy-a")(A)
-"""
-ALIAS = """
-    from pin_match.contract import register_matcher as rm
-
-    @rm("toy-a")
-    class A:
-        pass
-"""
-IN_A_FUNCTION = """
-    from pin_match.contract import register_matcher
-
-    def make():
-        @register_matcher("toy-a")
-        class A:
-            pass
-        return A
-"""
-DECORATED = """
-    from pin_match.contract import register_matcher
-
-    @register_matcher("toy-a")
-    class A:
-        pass
+        def _match_batch(self, images):
+            return [MatchResult(score=0.25) for _ in images]
 """
 
 
-@pytest.mark.parametrize("files, where, message", [
-    ({"a.py": NAME_IN_A_VARIABLE}, "a.py:5", "register_matcher used in a way the registry cannot read"),
-    ({"a.py": PLAIN_CALL}, "a.py:7", "register_matcher used in a way the registry cannot read"),
-    ({"a.py": ALIAS}, "a.py:2", "register_matcher used in a way the registry cannot read"),
-    ({"a.py": IN_A_FUNCTION}, "a.py:5", "register_matcher used in a way the registry cannot read"),
-    ({"sub/a.py": DECORATED}, "sub/a.py:4", "register_matcher in a subfolder of toy_builtins is never read"),
-    ({"a.py": DECORATED, "b.py": DECORATED}, "b.py:4", "matcher name 'toy-a' is already registered at .*a.py:4"),
-])
-def test_the_scan_refuses_what_it_cannot_read_naming_file_and_line(scan, files, where, message):
-    with pytest.raises(RegistrationError) as err:
-        scan(files)
-    text = str(err.value)
-    assert "\n" not in text and text.startswith(f"{scan.folder}/{where}: ")
-    assert re.search(message, text), text
+def test_a_new_file_in_the_built_in_package_is_all_a_built_in_needs(toy_builtins):
+    """However the decorator is written (an alias, a name in a variable) and wherever the file is (a subfolder)."""
+    toy_builtins({"brand_new.py": TOY.format(decorator="register_matcher", name="brand-new", cls="BrandNew"),
+                  "sub/__init__.py": "",
+                  "sub/deeper.py": TOY.format(decorator="rm", name="brand-deeper", cls="Deeper")})
+    assert list_matchers("brand-*") == ["brand-deeper", "brand-new"]
+    assert create_matcher("brand-new").default_sigma == 0.5
+    assert registry.get_matcher_class("brand-deeper").__module__ == "toy_builtins.sub.deeper"
+
+
+def test_a_built_in_module_that_cannot_be_imported_is_named_every_time(toy_builtins):
+    toy_builtins({"fine.py": TOY.format(decorator="register_matcher", name="brand-fine", cls="Fine"),
+                  "needs_more.py": "import no_such_dependency_of_a_matcher\n"})
+    for _ in range(2):  # the failed import is not remembered as done: the next lookup fails the same way
+        with pytest.raises(RegistrationError, match=r"^cannot import toy_builtins\.needs_more, a module of the "
+                                                    r"built-in matchers \(toy_builtins\): No module named "
+                                                    r"'no_such_dependency_of_a_matcher'$"):
+            list_matchers()
+
+
+def test_a_missing_built_in_package_is_named(monkeypatch):
+    """Issue 43.3c: a missing built-in package once listed no matchers at all, silently."""
+    monkeypatch.setattr(registry, "BUILTIN_PACKAGE", "no_such_matchers_package")
+    monkeypatch.setattr(discovery, "_IMPORTED", set())
+    with pytest.raises(RegistrationError, match=r"^cannot import no_such_matchers_package, a module of the built-in "
+                                                r"matchers \(no_such_matchers_package\)"):
+        create_matcher("sift")
 
 
 def _module_defining(module: str, name: str) -> types.ModuleType:
@@ -239,8 +170,7 @@ def _module_defining(module: str, name: str) -> types.ModuleType:
     return made
 
 
-def test_a_name_belongs_to_one_module_and_class(monkeypatch):
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
+def test_a_name_belongs_to_one_module_and_class(own_registry):
     _module_defining("toy_first", "test-one-owner")
     again = _module_defining("toy_first", "test-one-owner")  # the same module imported anew
     assert registry._REGISTRY["test-one-owner"] is again.Toy
@@ -249,30 +179,38 @@ def test_a_name_belongs_to_one_module_and_class(monkeypatch):
         _module_defining("toy_second", "test-one-owner")  # same class name, another module
 
 
-def test_a_plug_in_cannot_take_a_built_ins_name_even_before_it_is_imported(monkeypatch):
-    monkeypatch.setattr(registry, "_REGISTRY", {})
-    sift = registry.builtin_registrations()["sift"]
-    with pytest.raises(RegistrationError, match=f"'sift' is already registered by {re.escape(sift.dotted)}; "
-                                                f"toy_plugin.Toy needs another name"):
+def _dotted(cls: type) -> str:
+    return f"{cls.__module__}.{cls.__qualname__}"
+
+
+def test_a_plug_in_cannot_take_a_built_ins_name(own_registry):
+    sift = _dotted(registry.get_matcher_class("sift"))
+    with pytest.raises(RegistrationError, match=f"^matcher name 'sift' is already registered by {re.escape(sift)}; "
+                                                f"toy_plugin.Toy needs another name$"):
         _module_defining("toy_plugin", "sift")
-    assert registry._REGISTRY == {}
+    assert _dotted(registry.get_matcher_class("sift")) == sift
+
+
+def test_a_plug_in_imported_before_the_built_ins_with_a_built_ins_name_is_the_one_named(toy_builtins):
+    toy_builtins({"brand_new.py": TOY.format(decorator="register_matcher", name="brand-new", cls="BrandNew")})
+    _module_defining("toy_plugin", "brand-new")  # the built-ins are not imported yet: nothing to refuse it against
+    with pytest.raises(RegistrationError, match=r"^matcher name 'brand-new' belongs to the built-in "
+                                                r"toy_builtins\.brand_new\.BrandNew, but toy_plugin\.Toy registered it "
+                                                r"first; toy_plugin\.Toy needs another name$"):
+        list_matchers()
 
 
 def _entry_point(name: str, value: str) -> EntryPoint:
     return EntryPoint(name=name, value=value, group=registry.ENTRY_POINT_GROUP)
 
 
-def test_an_entry_point_cannot_take_a_name_another_class_holds(monkeypatch):
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    sift = registry.builtin_registrations()["sift"]
+def test_an_entry_point_cannot_take_a_name_another_class_holds(monkeypatch, own_registry):
+    sift = _dotted(registry.get_matcher_class("sift"))
     clash = _entry_point("sift", "toys:BrightMatcher")
     monkeypatch.setattr(registry, "_entry_points", lambda: {"sift": clash})
-    expected = f"'sift' is already registered by {re.escape(sift.dotted)}; toys.BrightMatcher needs"
-    with pytest.raises(RegistrationError, match=expected):
+    with pytest.raises(RegistrationError, match=f"'sift' is already registered by {re.escape(sift)}; "
+                                                f"toys.BrightMatcher needs"):
         list_matchers()
-    registry._REGISTRY.pop("sift", None)
-    with pytest.raises(RegistrationError, match=expected):
-        create_matcher("sift")
     # the same class under its own name again, declared by its package, is no clash
     monkeypatch.setattr(registry, "_entry_points",
                         lambda: {"test-bright": _entry_point("test-bright", "toys:BrightMatcher")})
@@ -281,17 +219,15 @@ def test_an_entry_point_cannot_take_a_name_another_class_holds(monkeypatch):
 
 def test_two_entry_points_cannot_declare_one_name(monkeypatch):
     declared = [_entry_point("toy-twice", "pkg_a:Toy"), _entry_point("toy-twice", "pkg_b:Toy")]
-    monkeypatch.setattr(registry, "entry_points", lambda group: declared)
+    monkeypatch.setattr(discovery, "entry_points", lambda group: declared)
     with pytest.raises(RegistrationError, match=r"^matcher name 'toy-twice' is declared by two entry points, "
                                                 r"pkg_a:Toy and pkg_b:Toy; uninstall one of their packages$"):
         list_matchers()
 
 
-def test_entry_point_matchers_are_found(monkeypatch):
+def test_entry_point_matchers_are_found(monkeypatch, own_registry):
     ep = EntryPoint(name="third-party", value="toys:BrightMatcher", group=registry.ENTRY_POINT_GROUP)
     monkeypatch.setattr(registry, "_entry_points", lambda: {"third-party": ep})
-    monkeypatch.setattr(registry, "_REGISTRY", dict(registry._REGISTRY))
-    registry._REGISTRY.pop("third-party", None)
     assert "third-party" in list_matchers()
     assert create_matcher("third-party").default_sigma == 100.0
 

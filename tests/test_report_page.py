@@ -82,7 +82,7 @@ def test_report_writes_a_self_contained_page(tiny, tmp_path):
     fs, table = tiny
     result = report(table, EvalContext(fs, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA, split="val")
     page = tmp_path / "report.html"
-    assert str(page) in result["files"]
+    assert result["files"]["page"] == str(page)
     text = page.read_text(encoding="utf-8")
     for needle in ("stub@abc", fs.fingerprint, "none.pt", "sigma", "Per target category", "false alarms"):
         assert needle in text

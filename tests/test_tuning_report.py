@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -165,7 +166,12 @@ def test_report_end_to_end(tiny_frameset, tmp_path):
     assert r"\%Match" in tex and r"\caption{stub@abc, split val, sigma = 0.5 (matcher default).}" in tex
     per_cat = pd.read_csv(out / "per_category.csv", index_col="category")
     assert list(per_cat.index) == ["mug"] and per_cat.loc["mug", "tm_pct"] == 50.0
-    assert result["files"][0].endswith("metrics.json")
+    assert result["files"] == {"metrics": str(out / "metrics.json"), "per_category": str(out / "per_category.csv"),
+                               "markdown": str(out / "metrics.md"), "latex": str(out / "metrics.tex"),
+                               "sigma_curves": str(out / "sigma_curves.png"),
+                               "score_distributions": str(out / "score_distributions.png"),
+                               "per_category_plot": str(out / "per_category.png"), "page": str(out / "report.html")}
+    assert all(Path(path).stat().st_size > 0 for path in result["files"].values())
 
 
 def test_report_threshold_sources(tiny_frameset, tmp_path):

@@ -1,12 +1,14 @@
-"""Find matchers by name: built-ins, anything decorated in a loaded module, and entry points.
+"""Find matchers by name: a class decorated with ``@register_matcher("name")`` registers itself at import.
 
-A built-in is found by reading the ``@register_matcher("name")`` decorators in the files of
-the built-in package, without importing them (``contract.scan``): listing names stays cheap
-(no torch), and a name never fails because its module was not imported yet. Heavy libraries
-load only when such a matcher is asked for. Third-party packages add matchers through the
-``pin_match.matchers`` entry-point group. A name belongs to one class: a second class
-claiming it (a plug-in taking a built-in's name, two entry points, two decorated modules) is
-refused, naming both, instead of the last one silently winning.
+That is timm's registry, plainly: importing a module registers what it decorates. The built-ins
+are the modules of ``pin_match.matchers`` (the top-level ``matchers/`` folder, subfolders
+included), all imported the first time a name is listed or asked for, so a new file there is all
+a built-in needs and no rule says how the decorator must be written. Importing them costs what
+torch costs (docs/performance.md); ``pin-match list`` builds every matcher to show its modality,
+sigma and weights, so it would import them anyway. Third-party packages add matchers through the
+``pin_match.matchers`` entry-point group, imported only when their name is asked for. A name
+belongs to one class: a second class claiming it (a plug-in taking a built-in's name, two entry
+points, two decorated modules) is refused, naming both, instead of the last one silently winning.
 """
 
 from __future__ import annotations
@@ -14,25 +16,28 @@ from __future__ import annotations
 import dataclasses
 import difflib
 import fnmatch
-import importlib
 import json
 import types
 import typing
 from collections.abc import Callable
-from importlib.metadata import EntryPoint, entry_points
+from importlib.metadata import EntryPoint
 from typing import Any
 
+from pin_match.contract import discovery
 from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, class_problems
-from pin_match.contract.scan import Registration, RegistrationError, scan_package
 from pin_match.errors import PinMatchError
 
 ENTRY_POINT_GROUP = "pin_match.matchers"
 
-# the package of the built-in plug-ins (the top-level matchers/ folder); its files are read, not imported, to list
-# their names, so a new file there with @register_matcher is all a built-in needs
+# the package of the built-in plug-ins (the top-level matchers/ folder); every module in it is imported before a name is
+# listed or looked up, so a new file there with @register_matcher is all a built-in needs
 BUILTIN_PACKAGE = "pin_match.matchers"
 
 _REGISTRY: dict[str, type[Matcher]] = {}
+
+
+class RegistrationError(PinMatchError, ValueError):
+    """A matcher name claimed by two classes, or a built-in module that cannot be imported."""
 
 
 class UnknownMatcherError(PinMatchError, KeyError):
@@ -65,53 +70,36 @@ def _dotted(obj: Any) -> str:
     return f"{obj.__module__}.{obj.__qualname__}"
 
 
-def _owner(name: str) -> str | None:
-    """The class that holds the name: the registered one, else the built-in whose file declares it."""
-    if name in _REGISTRY:
-        return _dotted(_REGISTRY[name])
-    builtin = builtin_registrations().get(name)
-    return builtin.dotted if builtin is not None else None
-
-
 def _refuse_second_claim(name: str, claimant: str) -> None:
-    owner = _owner(name)
-    if owner is not None and owner != claimant:
-        raise RegistrationError(f"matcher name {name!r} is already registered by {owner}; {claimant} needs "
-                                f"another name")
+    if name not in _REGISTRY or _dotted(_REGISTRY[name]) == claimant:
+        return
+    owner = _dotted(_REGISTRY[name])
+    if claimant.startswith(f"{BUILTIN_PACKAGE}."):  # a plug-in imported before the built-ins took a built-in's name
+        raise RegistrationError(f"matcher name {name!r} belongs to the built-in {claimant}, but {owner} registered "
+                                f"it first; {owner} needs another name")
+    raise RegistrationError(f"matcher name {name!r} is already registered by {owner}; {claimant} needs another name")
 
 
-def builtin_registrations() -> dict[str, Registration]:
-    """Registered name -> class, file and line of every built-in matcher."""
-    return scan_package(BUILTIN_PACKAGE)
-
-
-def builtin_modules() -> dict[str, str]:
-    """Registered name -> module of every built-in matcher."""
-    return {name: registration.module for name, registration in builtin_registrations().items()}
+def _import_builtins() -> None:
+    discovery.import_package(BUILTIN_PACKAGE, RegistrationError, "matchers")
 
 
 def _entry_points() -> dict[str, EntryPoint]:
-    found: dict[str, EntryPoint] = {}
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        if ep.name in found and found[ep.name].value != ep.value:
-            raise RegistrationError(f"matcher name {ep.name!r} is declared by two entry points, "
-                                    f"{found[ep.name].value} and {ep.value}; uninstall one of their packages")
-        found[ep.name] = ep
-    return found
+    return discovery.declared(ENTRY_POINT_GROUP, RegistrationError, "matcher name")
 
 
 def _check_entry_point(name: str, ep: EntryPoint) -> None:
     """Refuse an entry point whose name another class holds (it would be ignored without a word)."""
-    owner = _owner(name)
-    if owner is not None and owner != f"{ep.module}.{ep.attr}":
+    if name in _REGISTRY and _dotted(_REGISTRY[name]) != f"{ep.module}.{ep.attr}":
         _refuse_second_claim(name, _dotted(ep.load()))  # a re-exported class is the same class: load to know
 
 
 def available_names() -> list[str]:
+    _import_builtins()
     plugins = _entry_points()
     for name, ep in plugins.items():
         _check_entry_point(name, ep)
-    return sorted(set(builtin_modules()) | set(_REGISTRY) | set(plugins))
+    return sorted(set(_REGISTRY) | set(plugins))
 
 
 def list_matchers(pattern: str = "*") -> list[str]:
@@ -120,14 +108,10 @@ def list_matchers(pattern: str = "*") -> list[str]:
 
 
 def get_matcher_class(name: str) -> type[Matcher]:
+    _import_builtins()
     if name not in _REGISTRY:
         ep = _entry_points().get(name)
         if ep is not None:
-            _check_entry_point(name, ep)
-        builtins = builtin_modules()
-        if name in builtins:
-            importlib.import_module(builtins[name])
-        elif ep is not None:
             cls = ep.load()
             if name not in _REGISTRY:  # an entry point may name a class that is not decorated
                 register_matcher(name)(cls)

@@ -21,12 +21,11 @@ re-compressed); ``image_format="png"`` or ``"jpeg"`` re-encode.
 
 from __future__ import annotations
 
-import gzip
-import json
 from pathlib import Path
 
 import numpy as np
 
+from pin_match import atomic
 from pin_match.data.frameset import (
     DESCRIPTIONS,
     IMAGE_SUFFIXES,
@@ -50,7 +49,7 @@ def _load_episodes(recording: Path) -> list[dict]:
     for name in ("episodes.json", "episodes.json.gz"):
         path = recording / name
         if path.exists():
-            data = _read_json(path)
+            data = atomic.read_json(path, FrameSetError, "PInNED episodes file")
             episodes = data.get("episodes") if isinstance(data, dict) else data
             if not isinstance(episodes, list):
                 raise FrameSetError(f"{path}: expected a list of episodes (or {{'episodes': [...]}})")
@@ -58,20 +57,9 @@ def _load_episodes(recording: Path) -> list[dict]:
     raise FrameSetError(f"missing file {recording / 'episodes.json'} (PInNED episodes)")
 
 
-def _read_json(path: Path) -> object:
-    opener = gzip.open if path.suffix == ".gz" else open
-    try:
-        with opener(path, "rt", encoding="utf-8") as fh:
-            return json.load(fh)
-    except (OSError, EOFError, ValueError) as exc:  # gzip, decoding and JSON errors
-        raise FrameSetError(f"cannot read {path}: {exc}") from exc
-
-
 def _descriptions(objects: Path) -> dict[str, list[str]]:
     path = objects / DESCRIPTIONS
-    if not path.exists():
-        raise FrameSetError(f"missing file {path}")
-    raw = _read_json(path)
+    raw = atomic.read_json(path, FrameSetError)  # a missing one: "missing file PATH"
     if not isinstance(raw, dict):
         raise FrameSetError(f"{path}: expected {{object_id: [3 descriptions]}}")
     out = {}

@@ -8,12 +8,12 @@ a stale table of another config or frame-set in the same folder is never picked 
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import pandas as pd
 
+from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.evaluator import EvalContext
@@ -77,7 +77,7 @@ def load_bench(run_dir: str | Path | BenchLayout,
                             "`pin-match demo` first")
     tables, sigmas, reports = {}, {}, {}
     for path in report_files:
-        report = json.loads(path.read_text(encoding="utf-8"))
+        report = atomic.read_json(path, AnalysisError, "report")
         name, matcher_id = report["matcher"], report["matcher_id"]
         if report.get("frameset_fingerprint") != fs.fingerprint:
             raise AnalysisError(f"{path} reports frame-set {report.get('frameset_fingerprint')}, "
@@ -94,4 +94,5 @@ def load_bench(run_dir: str | Path | BenchLayout,
 def tuned_thresholds(layout: BenchLayout, matchers: list[str]) -> dict[str, dict]:
     """The thresholds files of the matchers whose sigma the bench tuned (the others have none)."""
     files = {name: layout.thresholds(name) for name in matchers}
-    return {name: json.loads(path.read_text(encoding="utf-8")) for name, path in files.items() if path.exists()}
+    return {name: atomic.read_json(path, AnalysisError, "thresholds file") for name, path in files.items()
+            if path.exists()}

@@ -1,8 +1,9 @@
 """Where a bench folder (what ``bench`` and ``pin-match demo`` write) keeps each file: one object, asked by all.
 
 ``bench`` writes through it, ``analysis.load_bench`` and ``compare_bench`` read through it and
-``index_page`` finds the pages through it, so a file is named in one place. The demo nests a
-second bench folder (the real look-alikes) inside the first: ``BenchLayout.nested``.
+``index_page`` finds the pages through it, so a file is named in one place; one report folder's
+files, by name, are ``ReportFiles`` (``report`` writes them, ``report_page`` shows the plots).
+The demo nests a second bench folder (the real look-alikes) inside the first: ``BenchLayout.nested``.
 """
 
 from __future__ import annotations
@@ -11,6 +12,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 REPORT_PAGE = "report.html"
+METRICS = "metrics.json"
 COMPARE_PAGE = "compare.html"
 
 
@@ -31,6 +33,28 @@ class CompareFolder:
     @property
     def page(self) -> Path:
         return self.root / COMPARE_PAGE
+
+
+@dataclass(frozen=True)
+class ReportFiles:
+    """One matcher's report folder at one sigma, each file by name: ``report`` writes them, the page shows the plots."""
+
+    metrics: Path  # metrics.json, written last: a report folder without one is a report that stopped
+    per_category: Path
+    markdown: Path
+    latex: Path
+    sigma_curves: Path
+    score_distributions: Path
+    per_category_plot: Path
+    page: Path
+
+    @classmethod
+    def in_folder(cls, folder: str | Path) -> ReportFiles:
+        folder = Path(folder)
+        return cls(metrics=folder / METRICS, per_category=folder / "per_category.csv", markdown=folder / "metrics.md",
+                   latex=folder / "metrics.tex", sigma_curves=folder / "sigma_curves.png",
+                   score_distributions=folder / "score_distributions.png",
+                   per_category_plot=folder / "per_category.png", page=folder / REPORT_PAGE)
 
 
 @dataclass(frozen=True)
@@ -61,10 +85,10 @@ class BenchLayout:
 
     def report_metrics(self) -> list[Path]:
         """Every report's ``metrics.json`` (written last, so a report that stopped has none), sorted by matcher."""
-        return sorted((self.root / "reports").glob("*/metrics.json"))
+        return sorted((self.root / "reports").glob(f"*/{METRICS}"))
 
     def report_page(self, matcher: str) -> Path:
-        return self.report(matcher) / REPORT_PAGE
+        return ReportFiles.in_folder(self.report(matcher)).page
 
     def compare(self, first: str, other: str) -> CompareFolder:
         """``other`` against ``first`` (the differences are other minus first)."""

@@ -9,21 +9,19 @@ Every file names the sigma and where it came from (metrics.json: ``sigma``,
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.evaluator import EvalContext, evaluate
-from pin_match.evaluation.layout import REPORT_PAGE
+from pin_match.evaluation.layout import ReportFiles
 from pin_match.evaluation.plots import plot_per_category, plot_score_distributions, plot_sigma_curves
 from pin_match.evaluation.report_page import write_report_page
 from pin_match.evaluation.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tables import latex_table, markdown_table, report_tables
 from pin_match.scoring.table import ScoreTable
-
-FILES = ("metrics.json", "per_category.csv", "metrics.md", "metrics.tex", "sigma_curves.png",
-         "score_distributions.png", "per_category.png", REPORT_PAGE)
 
 
 def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path, *,
@@ -34,25 +32,25 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     ``data``: the frame-set, or the run's ``EvalContext`` (its labels and bootstrap options).
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
     or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
+    ``files``: each file written, by its name in ``ReportFiles`` (``{"metrics": ".../metrics.json", ...}``).
     """
     ctx = EvalContext.of(data)
     choice = sigma if isinstance(sigma, SigmaChoice) else \
         resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
     evaluation = evaluate(table, ctx, choice, split)
     result = evaluation.result
-    out = Path(out_dir)
-    files = [out / name for name in FILES]
-    atomic.write_text(files[1], evaluation.per_category.to_csv(index_label="category"))
+    files = ReportFiles.in_folder(out_dir)
+    atomic.write_text(files.per_category, evaluation.per_category.to_csv(index_label="category"))
     overall, per_cat = report_tables(result, evaluation.per_category)
     title = f"{table.matcher_id}, split {result['split']}, sigma = {choice.value:g} ({choice.source})"
-    atomic.write_text(files[2], f"# {title}\n\nsigma: {choice.detail}\n\n{markdown_table(overall)}\n\n"
-                                f"## Per target category\n\n{markdown_table(per_cat)}\n")
-    atomic.write_text(files[3], latex_table(overall, caption=f"{title}.") + "\n"
+    atomic.write_text(files.markdown, f"# {title}\n\nsigma: {choice.detail}\n\n{markdown_table(overall)}\n\n"
+                                      f"## Per target category\n\n{markdown_table(per_cat)}\n")
+    atomic.write_text(files.latex, latex_table(overall, caption=f"{title}.") + "\n"
                       + latex_table(per_cat, caption=f"{title}, per target category.") + "\n")
-    plot_sigma_curves(sweep(evaluation.arrays), choice.value, files[4], title)
-    plot_score_distributions(evaluation.arrays, choice.value, files[5], title)
-    plot_per_category(evaluation.per_category, files[6], title)
-    write_report_page(files[7], table, ctx.fs, evaluation)
+    plot_sigma_curves(sweep(evaluation.arrays), choice.value, files.sigma_curves, title)
+    plot_score_distributions(evaluation.arrays, choice.value, files.score_distributions, title)
+    plot_per_category(evaluation.per_category, files.per_category_plot, title)
+    write_report_page(files, table, ctx.fs, evaluation)
     # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)
-    atomic.write_json(files[0], result)
-    return {**result, "files": [str(f) for f in files]}
+    atomic.write_json(files.metrics, result)
+    return {**result, "files": {name: str(path) for name, path in dataclasses.asdict(files).items()}}

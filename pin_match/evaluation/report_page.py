@@ -17,13 +17,12 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation import html
 from pin_match.evaluation.evaluator import Evaluation
 from pin_match.evaluation.gallery import DEFAULT_CAP, Section, frame_points, sections
+from pin_match.evaluation.layout import ReportFiles
 from pin_match.evaluation.pictures import frame_image, legend, references
 from pin_match.evaluation.tables import report_tables
 from pin_match.scoring.table import ScoreTable
 
 ASSETS = "report_files"
-PLOTS = (("sigma_curves.png", "metrics against sigma"), ("score_distributions.png", "score distributions per role"),
-         ("per_category.png", "metrics per target category"))
 
 
 def page_legend() -> Markup:
@@ -69,18 +68,19 @@ def section_html(fs: FrameSet, table: ScoreTable, section: Section, sigma: float
     return parts
 
 
-def write_report_page(path: Path, table: ScoreTable, fs: FrameSet, evaluation: Evaluation,
+def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evaluation: Evaluation,
                       cap: int = DEFAULT_CAP) -> Path:
-    """Write ``report.html`` (and ``report_files/``) into a report folder whose plots are already written."""
+    """Write ``files.page`` (and ``report_files/`` beside it) into a report folder whose plots are already written."""
     result = evaluation.result
     sigma = float(result["sigma"])
     overall, per_category = report_tables(result, evaluation.per_category)
-    assets = html.Assets(path, ASSETS)
+    assets = html.Assets(files.page, ASSETS)
+    plots = ((files.sigma_curves, "metrics against sigma"), (files.score_distributions, "score distributions per role"),
+             (files.per_category_plot, "metrics per target category"))
     parts = [header(table, fs, result), html.heading("PIN detection metrics"),
              html.table(overall, f"split {result['split']}, sigma {sigma:g} ({result['sigma_source']})"),
-             html.heading("Per target category"), html.table(per_category), html.heading("Plots")]
-    parts.append(html.gallery([html.image(name, alt, 440) for name, alt in PLOTS if (path.parent / name).exists()]))
-    parts.append(page_legend())
+             html.heading("Per target category"), html.table(per_category), html.heading("Plots"),
+             html.gallery([html.image(plot.name, alt, 440) for plot, alt in plots if plot.exists()]), page_legend()]
     for section in sections(evaluation.frames, sigma, cap):
         parts += section_html(fs, table, section, sigma, cap, assets)
-    return html.write_page(path, f"{table.matcher_id} on {result['split']} at sigma {sigma:g}", parts)
+    return html.write_page(files.page, f"{table.matcher_id} on {result['split']} at sigma {sigma:g}", parts)

@@ -8,12 +8,12 @@ here too: a tuned file (``pin-match tune``) or a table of several (``paper_thres
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from pin_match import atomic
 from pin_match.errors import PinMatchError
 
 # the paper's sigmas ship inside the package (package data), so ``--thresholds paper`` works from any install
@@ -77,13 +77,10 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
     ``matcher_name`` may be a registry name or a full id (``name@hash``).
     """
     path = thresholds_path(thresholds)
-    try:
-        data = json.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
+    if not path.exists():
         raise SigmaError(f"no thresholds file {path}: run `pin-match tune` first (it writes it), pass --threshold "
-                         "SIGMA, or --thresholds paper") from None
-    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise SigmaError(f"{path} is not valid JSON: {exc}") from exc
+                         "SIGMA, or --thresholds paper")
+    data = atomic.read_json(path, SigmaError, "thresholds file")
     names = {matcher_name, matcher_name.split("@")[0]}
     if isinstance(data, dict) and "sigma" in data:
         if data.get("matcher") not in names and data.get("matcher_id") not in names:

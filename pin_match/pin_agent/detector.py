@@ -17,7 +17,6 @@ its two squares.
 from __future__ import annotations
 
 import hashlib
-import json
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -25,6 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from pin_match import atomic
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Matcher, MatchResult, Modality, Target
 from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
@@ -112,7 +112,7 @@ class PinDetector:
 
 def _check_tuned_for(thresholds: str | Path, matcher: Matcher) -> None:
     """A sigma tuned under another config of the same matcher is refused: it is not that matcher's sigma."""
-    data = json.loads(thresholds_path(thresholds).read_text(encoding="utf-8"))  # valid: resolve_sigma read it
+    data = atomic.read_json(thresholds_path(thresholds), SigmaError, "thresholds file")  # resolve_sigma read it
     tuned_id = data.get("matcher_id") if isinstance(data, dict) else None
     if tuned_id is not None and tuned_id != matcher.id:
         raise SigmaError(f"{thresholds_path(thresholds)} was tuned for {tuned_id}, but the detector's matcher is "

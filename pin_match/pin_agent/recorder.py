@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import fcntl
 import io
-import json
 import shutil
 import tempfile
 from collections.abc import Iterator, Mapping
@@ -62,10 +61,10 @@ class FrameRecorder:
         path = self.root / INDEX
         if not path.exists():
             return {}
-        try:
-            episodes = json.loads(path.read_text(encoding="utf-8"))["episodes"]
-        except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise RecordingError(f"cannot read the recording's episode list {path}: {exc}") from exc
+        data = atomic.read_json(path, RecordingError, "the recording's episode list")
+        episodes = data.get("episodes") if isinstance(data, dict) else None
+        if not isinstance(episodes, list):
+            raise RecordingError(f"the recording's episode list {path} holds no 'episodes' list")
         return {str(e["episode_id"]): e for e in episodes}
 
     @property

@@ -85,7 +85,7 @@ class FeatureStore:
         root = Path(root)
         if not (root / META).exists():
             raise FeatureStoreError(f"no feature store at {root} (missing {META}): run pin-match features first")
-        meta = json.loads((root / META).read_text(encoding="utf-8"))
+        meta = atomic.read_json(root / META, FeatureStoreError, "feature store metadata")
         if meta.get("version") != STORE_VERSION:
             raise FeatureStoreError(f"feature store {root} has version {meta.get('version')}, this pin_match "
                                     f"reads version {STORE_VERSION}: rebuild it with pin-match features")

@@ -5,13 +5,11 @@ out)`` first writes the source folder of a source whose photos are downloaded. T
 the catalogue: ``catalogue``; the look-alike sources' folder format (``photo_folder``), the steps
 that write one (``prepare``) and the frame-set built from one (``lookalike_set``) are shared by
 ``core50``, ``grocery``, ``myvlm`` and ``twins``; ``gso`` writes a scan folder for the synthetic
-generator instead (``pin_match.data.synth.scans``). Every built-in module is imported below, so the
-catalogue never depends on what else was imported first.
+generator instead (``pin_match.data.synth.scans``). Nothing lists the source modules: the
+catalogue imports every module of this package the first time a name is asked for, and third
+parties add theirs through the ``pin_match.data_sources`` entry-point group.
 """
 
-from pin_match.data.sources import core50, grocery, gso, myvlm, recolour, synthetic, twins
-from pin_match.data.sources.catalogue import DataSource, DataSourceError, get, names, register
+from pin_match.data.sources.catalogue import ENTRY_POINT_GROUP, DataSource, DataSourceError, get, names, register
 
-BUILT_IN = (core50, grocery, gso, myvlm, recolour, synthetic, twins)
-
-__all__ = ["BUILT_IN", "DataSource", "DataSourceError", "get", "names", "register"]
+__all__ = ["ENTRY_POINT_GROUP", "DataSource", "DataSourceError", "get", "names", "register"]

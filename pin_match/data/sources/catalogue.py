@@ -1,30 +1,39 @@
 """The data-source interface and the catalogue that finds a source by name.
 
 A source is what turns something (a generator, photos shipped with pin_match, a downloaded
-repository) into a frame-set. Each built-in one is a module of ``pin_match.data.sources``
-that registers one ``DataSource``; ``pin-match data list / prepare / build`` and the library
-reach every source the same way:
+repository) into a frame-set. Each one registers one ``DataSource``; ``pin-match data list /
+prepare / build`` and the library reach every source the same way:
 
 - ``build(out, variant, seed, src=...)`` writes a frame-set (through ``FrameSetWriter``, so
   validation, fingerprints and atomic writes come for free);
 - ``prepare(inputs, out)``, for a source whose photos are downloaded, writes the source folder
   ``build`` reads (``pin_match.data.sources.photo_folder``) from a checkout.
 
-The rules every source shares (a known variant, a source folder where one is needed and none
-where it is not, one name per source) are checked here once.
+Found as matchers are (``pin_match.contract.discovery``): a built-in is a module of
+``pin_match.data.sources`` that calls ``register`` as it is imported, and every module of that
+package is imported the first time a name is listed or asked for, so a new file there is all a
+built-in needs. A third-party package adds a source through the ``pin_match.data_sources``
+entry-point group, naming its ``DataSource`` (``my-source = "my_package.source:SOURCE"``),
+loaded only when its name is asked for. The rules every source shares (a known variant, a
+source folder where one is needed and none where it is not, one source per name) are checked
+here once.
 """
 
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from importlib.metadata import EntryPoint
 from pathlib import Path
 
+from pin_match.contract import discovery
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 
 # what a source's build does with a source folder (--src)
 SRC_NONE, SRC_OPTIONAL, SRC_REQUIRED = "none", "optional", "required"
+ENTRY_POINT_GROUP = "pin_match.data_sources"
+BUILTIN_PACKAGE = "pin_match.data.sources"  # every module in it is imported before a name is listed or looked up
 
 
 class DataSourceError(PinMatchError, ValueError):
@@ -88,6 +97,11 @@ def register(source: DataSource) -> DataSource:
 
 def get(name: str) -> DataSource:
     """The source registered as ``name``, or an error listing the known ones."""
+    _import_builtins()
+    if name not in _CATALOGUE:
+        ep = _entry_points().get(name)
+        if ep is not None:
+            _load(ep)
     try:
         return _CATALOGUE[name]
     except KeyError:
@@ -95,5 +109,36 @@ def get(name: str) -> DataSource:
 
 
 def names() -> list[str]:
-    """Every registered source's name, sorted."""
-    return sorted(_CATALOGUE)
+    """Every source's name, built-in or declared by an entry point, sorted."""
+    _import_builtins()
+    declared = _entry_points()
+    for name, ep in declared.items():
+        if name in _CATALOGUE:  # the same source again is harmless; another one under a held name is refused
+            _load(ep)
+    return sorted(set(_CATALOGUE) | set(declared))
+
+
+def _import_builtins() -> None:
+    discovery.import_package(BUILTIN_PACKAGE, DataSourceError, "data sources")
+
+
+def _entry_points() -> dict[str, EntryPoint]:
+    return discovery.declared(ENTRY_POINT_GROUP, DataSourceError, "data source")
+
+
+def _load(ep: EntryPoint) -> None:
+    """Register the ``DataSource`` an entry point names, or say what is wrong with the entry point."""
+    where = f"entry point {ep.name!r} ({ep.value}, group {ENTRY_POINT_GROUP})"
+    try:
+        source = ep.load()
+    except Exception as exc:  # whatever importing a third party's module raises, it is that package's fault
+        raise DataSourceError(f"data source {where} cannot be loaded: {type(exc).__name__}: {exc}") from exc
+    if not isinstance(source, DataSource):
+        raise DataSourceError(f"data source {where} names a {type(source).__name__}, not a DataSource")
+    if source.name != ep.name:
+        raise DataSourceError(f"data source {where} names the source {source.name!r}; the entry point's name must "
+                              f"be the source's")
+    try:
+        register(source)
+    except DataSourceError as exc:
+        raise DataSourceError(f"data source {where}: {exc}; give it another name") from None
