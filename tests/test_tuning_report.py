@@ -246,3 +246,22 @@ def test_a_shared_context_gives_the_numbers_of_a_fresh_one(tiny_frameset, tmp_pa
     assert (alone["metrics"], alone["ci95"]) == (given["metrics"], given["ci95"])
     assert tuned["metrics_at_sigma"] == tune(table, tiny_frameset)["metrics_at_sigma"]
     assert shared.scored(table, "val") is shared.scored(table, "val")
+
+
+def test_bench_passes_its_tuned_choice_in_memory_and_a_default_run_leaves_no_stale_thresholds(tiny_frameset, tmp_path,
+                                                                                            monkeypatch):
+    from pin_match.evaluation import bench as bench_module
+    from pin_match.evaluation.analysis import load_bench
+    from pin_match.evaluation.bench import bench
+    from pin_match.scoring import RunOptions
+
+    ctx, run = EvalContext(tiny_frameset, Bootstrap(n_boot=10)), RunOptions(workers=1, progress=False)
+    reads = []
+    monkeypatch.setattr(bench_module, "load_threshold", lambda *a: reads.append(a))
+    tuned = bench(ctx, ["color"], tmp_path, run=run)
+    assert reads == []  # the tuned sigma is not read back from its file
+    path = tuned.run.layout.thresholds("color")
+    assert json.loads(path.read_text())["sigma"] == tuned.run.tuned["color"]["sigma"] == tuned.results[0]["sigma"]
+    untuned = bench(ctx, ["color"], tmp_path, sigma_from="default", run=run)
+    assert not path.exists() and untuned.run.tuned == {}  # an earlier run's file is not this run's
+    assert load_bench(tmp_path, tiny_frameset).tuned == {}

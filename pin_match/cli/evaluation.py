@@ -1,4 +1,4 @@
-"""The evaluation half of the CLI: tune, report, similarity, bench, demo (no model needed except similarity).
+"""The evaluation half of the CLI: tune, report, similarity, bench, carry, demo.
 
 ``tune`` and ``report`` take a score table by path or find it in the score cache from
 ``--frameset`` and ``--matcher`` (the same ``--cfg`` / ``--weights`` as ``score``); ``bench``
@@ -131,6 +131,38 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     print(f"\nthe story, every table and a link to every page: {Path(a.out) / 'index.html'}")
 
 
+def _cmd_carry(a: argparse.Namespace) -> None:
+    import pandas as pd
+
+    from pin_match import atomic
+    from pin_match.contract.registry import create_matcher
+    from pin_match.evaluation.carry import ScoredSet, leave_one_out
+    from pin_match.evaluation.evaluator import EvalContext
+    from pin_match.evaluation.intervals import instance_clusters
+    from pin_match.evaluation.metrics import Bootstrap
+    from pin_match.scoring import score
+
+    matcher = create_matcher(a.matcher, **matcher_overrides(a))
+    sets = {}
+    for item in a.framesets:
+        path, _, split = item.partition(":")
+        ctx = EvalContext(FrameSet.load(path), Bootstrap(n_boot=a.bootstrap))
+        splits = set(ctx.fs.episodes.split)
+        table = score(ctx.fs, matcher, out=a.cache, run=run_options(a))
+        sets[item] = ScoredSet(tuning=ctx.scored(table, "train" if "train" in splits else None),
+                               reading=ctx.scored(table, split or ("val" if "val" in splits else None)),
+                               clusters=instance_clusters(ctx.fs.episodes))
+    rows = leave_one_out(sets, Bootstrap(n_boot=a.bootstrap))
+    columns = ["set", "auroc_same", "sigma", "cm", "cm_low", "cm_high", "first_precision", "own_sigma", "own_cm",
+               "own_first_precision", "first_gap"]
+    with pd.option_context("display.width", 200, "display.max_colwidth", 60):
+        print(f"{matcher.id}: sigma chosen on every other set, read on the set (worst first)\n"
+              + rows[columns].round(3).to_string(index=False))
+    if a.json:
+        atomic.write_json(a.json, dict(matcher_id=matcher.id, rows=rows.to_dict("records")))
+        print(f"-> {a.json}")
+
+
 def _table_arguments(s: argparse.ArgumentParser) -> None:
     s.add_argument("scores", type=Path, nargs="*",
                    help="score table (parquet, or its cache folder) printed by `pin-match score`; or use --matcher")
@@ -192,6 +224,20 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_bench_config(s)
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_bench)
+
+    s = sub.add_parser("carry", help="how far one sigma carries: chosen on every other frame-set, read on each",
+                       description="Leave one frame-set out: sigma chosen (first-match objective) on the train "
+                                   "splits of all the others (all frames of a set without one), read on its val "
+                                   "split (all frames without one, or PATH:SPLIT); CM and first-match precision "
+                                   "with intervals over target instances, beside the set's own best sigma.")
+    s.add_argument("framesets", nargs="+", help="frame-sets, PATH or PATH:SPLIT (at least two)")
+    s.add_argument("--matcher", required=True, help="registered matcher (`pin-match list`)")
+    add_matcher_config(s)
+    s.add_argument("--cache", type=Path, default=outputs.SCORES, help=f"score cache (default {outputs.SCORES})")
+    s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
+    s.add_argument("--json", type=Path, help="write the rows here")
+    add_run_options(s, workers=WORKERS_HELP)
+    s.set_defaults(func=_cmd_carry)
 
     scanned, real = SCANNED, LOOKALIKES
     s = sub.add_parser("demo", help="the whole job on scanned look-alikes rendered along PIN walks and on real "

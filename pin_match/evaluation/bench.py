@@ -20,11 +20,11 @@ from pin_match import atomic
 from pin_match.contract.registry import get_matcher_class
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.analysis import BenchRun, tuned_thresholds
+from pin_match.evaluation.analysis import BenchRun
 from pin_match.evaluation.evaluator import EvalContext
 from pin_match.evaluation.layout import BenchLayout
 from pin_match.evaluation.report import report
-from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma
+from pin_match.evaluation.sigma import SigmaChoice, load_threshold, resolve_sigma, tuned_choice
 from pin_match.evaluation.tables import latex_table, markdown_table, report_row, side_by_side, sigma_caption
 from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, tune, write_thresholds
 from pin_match.scoring.api import score_many
@@ -112,11 +112,11 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     n_frames = len(ctx.fs.split(scored_split).frames)
     with watch.step(f"score {' + '.join(configs)}", f"{n_frames} frames, one pass"):
         tables = dict(zip(configs, score_many(ctx.fs, configs, split=scored_split, out=layout.scores, run=run)))
-    results = []
+    results, tuned = [], {}
     with watch.step("tune + report"):
         for name in tqdm(configs, desc="tune + report", unit="matcher", disable=not run.progress,
                          dynamic_ncols=True):
-            choice = _choose(tables[name], ctx, sigma_from, objective, layout.thresholds(name))
+            choice, tuned[name] = _choose(tables[name], ctx, sigma_from, objective, layout.thresholds(name))
             results.append(report(tables[name], ctx, layout.report(name), sigma=choice, split=REPORT_SPLIT))
         rows = [report_row(r) for r in results]
         joint = side_by_side(rows)
@@ -126,15 +126,20 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
         atomic.write_text(layout.table("csv"), joint.to_csv())
     reports = {name: {k: v for k, v in r.items() if k != "files"} for name, r in zip(configs, results)}
     run_loaded = BenchRun(layout, ctx, tables, {name: float(r["sigma"]) for name, r in reports.items()}, reports,
-                          tuned_thresholds(layout, list(configs)))
+                          {name: result for name, result in tuned.items() if result is not None})
     return Bench(joint, results, run_loaded)
 
 
 def _choose(table: ScoreTable, ctx: EvalContext, sigma_from: str, objective: str,
-            threshold_file: Path) -> SigmaChoice:
-    if sigma_from == "default":
-        return resolve_sigma(table.matcher_id, table.meta.get("default_sigma"))
-    if sigma_from == "paper":
-        return load_threshold("paper", table.matcher_id)
-    write_thresholds(tune(table, ctx, objective=objective, split=sigma_from), threshold_file)
-    return load_threshold(threshold_file, table.matcher_id)
+            threshold_file: Path) -> tuple[SigmaChoice, dict | None]:
+    """The sigma applied, and the tuning result when it was tuned (written to ``threshold_file`` for the record,
+    passed on in memory). Without tuning, a thresholds file an earlier run left there is removed: it would be
+    read back as this run's."""
+    if sigma_from in ("default", "paper"):
+        threshold_file.unlink(missing_ok=True)
+        if sigma_from == "default":
+            return resolve_sigma(table.matcher_id, table.meta.get("default_sigma")), None
+        return load_threshold("paper", table.matcher_id), None
+    result = tune(table, ctx, objective=objective, split=sigma_from)
+    write_thresholds(result, threshold_file)
+    return tuned_choice(result, f"tuned on {ctx.fs.root}, written to {threshold_file}"), result

@@ -85,9 +85,8 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
     if isinstance(data, dict) and "sigma" in data:
         if data.get("matcher") not in names and data.get("matcher_id") not in names:
             raise SigmaError(f"{path} holds the threshold of {data.get('matcher')!r}, not {matcher_name!r}")
-        value = _sigma(data["sigma"], path, matcher_name)
-        how = f"{data.get('objective')} on {data.get('split')}" if data.get("objective") else "tuned"
-        return SigmaChoice(value, f"tuned: {how}", f"tuned ({how}), read from {path}")
+        _sigma(data["sigma"], path, matcher_name)
+        return tuned_choice(data, f"read from {path}")
     if isinstance(data, dict) and isinstance(data.get("thresholds"), dict):
         table = data["thresholds"]
         covered = sorted(k for k, v in table.items() if _entry(v) is not None)
@@ -102,6 +101,12 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
         raise SigmaError(f"{path} has no threshold for {matcher_name!r}; it covers only {', '.join(covered)}. "
                          f"Tune {matcher_name.split('@')[0]} (pin-match tune) or pass --threshold SIGMA")
     raise SigmaError(f"{path} is neither a tuned thresholds file nor a {{'thresholds': {{...}}}} table")
+
+
+def tuned_choice(result: dict, where: str) -> SigmaChoice:
+    """The choice a tuning result (``tuning.tune``'s, or its file's content) makes; ``where`` says where it is."""
+    how = f"{result.get('objective')} on {result.get('split')}" if result.get("objective") else "tuned"
+    return SigmaChoice(float(result["sigma"]), f"tuned: {how}", f"tuned ({how}), {where}")
 
 
 def _entry(value: object) -> object:

@@ -23,10 +23,11 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.carry import carried, pooled
 from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.intervals import bootstrap_ci, instance_clusters
+from pin_match.evaluation.intervals import instance_clusters
 from pin_match.evaluation.labels import scored_frames
-from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap
 from pin_match.evaluation.paired import paired_comparison
 from pin_match.evaluation.tuning import sigma_for
 from pin_match.fitting.logistic import FitError
@@ -115,16 +116,14 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
     clusters = {name: instance_clusters(fs.episodes) for name, (fs, _, _) in sets.evals.items()}
     rows, sigmas = [], {}
     for name, score_of in scorers.items():
-        dev = pd.concat([scored(labels, score_of(table), name).assign(  # variants share ids
-            frame_id=lambda t, i=i: f"{i}:" + t.frame_id, episode_id=lambda t, i=i: f"{i}:" + t.episode_id)
-            for i, (_, labels, table) in enumerate(sets.train.values())])
-        if dev.empty:
+        dev = [scored(labels, score_of(table), name) for _, labels, table in sets.train.values()]
+        if all(d.empty for d in dev):
             raise FitError(f"verifier report: the development sets' train splits ({', '.join(sets.train)}) hold no "
                            "frame to tune sigma on")
-        sigmas[name] = sigma_for(dev)
+        sigmas[name] = sigma_for(pooled(dev))
         for set_name, (_, labels, table) in sets.evals.items():
-            rows.append(_row(name, set_name, scored(labels, score_of(table), name), sigmas[name], clusters[set_name],
-                             boot))
+            frames = scored(labels, score_of(table), name)
+            rows.append(dict(matcher=name, set=set_name, **carried(frames, sigmas[name], clusters[set_name], boot)))
     paired = {}
     default = "verify default" if "default" in specs else "verify all"
     for set_name, (_, labels, table) in sets.evals.items():
@@ -136,20 +135,6 @@ def report(train: Sequence[str], evals: Sequence[str], features: str | Path = ou
                                 high=float(diff["CI high"]))
     recall = {name: candidate_recall(table, labels) for name, (_, labels, table) in sets.evals.items()}
     return dict(rows=rows, sigmas=sigmas, paired=paired, specs=specs, candidate_recall=recall, sets=sets)
-
-
-def _row(name: str, set_name: str, frames: pd.DataFrame, sigma: float, clusters: dict, boot: Bootstrap) -> dict:
-    """One matcher on one evaluation set: AUROC-same with its interval, TM / CM at the development sigma and what
-    the set's own best sigma would give."""
-    arrays = frame_arrays(frames)
-    low, high = bootstrap_ci(arrays, sigma, clusters=clusters, boot=boot)["auroc_same"] or (np.nan, np.nan)
-    own = sigma_for(frames)
-    at, at_own = detection_metrics(arrays, sigma), detection_metrics(arrays, own)
-    ranking = ranking_metrics(arrays)
-    return dict(matcher=name, set=set_name, auroc_same=ranking["auroc_same"], low=low, high=high,
-                auroc=ranking["auroc_target"], sigma=sigma, tm=at["tm_pct"], cm=at["cm_pct"], match=at["match_pct"],
-                first_precision=at["first_match_precision"], own_sigma=own, own_cm=at_own["cm_pct"],
-                own_first_precision=at_own["first_match_precision"])
 
 
 def candidate_lines(cands: pd.DataFrame, spec: dict) -> tuple[list[float], list[str]]:

@@ -1,0 +1,78 @@
+"""How far one sigma carries: chosen on some frame-sets, read on one that nobody tuned it on.
+
+A PIN agent runs one sigma in a house nobody tuned it on, so a set's own best sigma flatters a
+matcher: the figure that matters is what a sigma chosen elsewhere gives there. ``carried`` reads
+a sigma on a set beside that set's own best (PIN's first-match objective): CM (share of matched
+frames that show a look-alike) and first-match precision, with intervals over target instances.
+``leave_one_out`` chooses sigma on every set but one, reads it on the one left out, for each set
+in turn; its worst row (highest CM, widest first-match gap) is how far the score carries.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pin_match.errors import PinMatchError
+from pin_match.evaluation.intervals import bootstrap_ci
+from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.tuning import sigma_for
+
+
+class CarryError(PinMatchError, ValueError):
+    """Too few sets to leave one out, or a set with no frames to tune or read."""
+
+
+@dataclass(frozen=True)
+class ScoredSet:
+    """One frame-set's scored frames (``EvalContext.scored``): those sigma is tuned on (its train split, or all of
+    it) and those it is read on (its val split, or all of it), and each episode's target instance."""
+
+    tuning: pd.DataFrame
+    reading: pd.DataFrame
+    clusters: dict[str, str]
+
+
+def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: Bootstrap = DEFAULT_BOOT) -> dict:
+    """``frames`` read at ``sigma`` beside their own best sigma: AUROC-same, CM and first-match precision with
+    intervals (target instances resampled), and the first-match gap (own best minus carried, in points); a metric
+    undefined at a sigma (nothing matched) is NaN."""
+    arrays = frame_arrays(frames)
+    own = sigma_for(frames)
+    at, at_own = detection_metrics(arrays, sigma), detection_metrics(arrays, own)
+    ci = bootstrap_ci(arrays, sigma, clusters=clusters, boot=boot)
+    low_high = {key: ci[key] or [np.nan, np.nan] for key in ("auroc_same", "cm_pct", "first_match_precision")}
+    ranking = ranking_metrics(arrays)
+    row = dict(auroc_same=ranking["auroc_same"], auroc_target=ranking["auroc_target"],
+               auroc_low=low_high["auroc_same"][0], auroc_high=low_high["auroc_same"][1],
+               sigma=sigma, tm=at["tm_pct"], cm=at["cm_pct"], cm_low=low_high["cm_pct"][0],
+               cm_high=low_high["cm_pct"][1], match=at["match_pct"], first_precision=at["first_match_precision"],
+               first_low=low_high["first_match_precision"][0], first_high=low_high["first_match_precision"][1],
+               own_sigma=own, own_cm=at_own["cm_pct"], own_first_precision=at_own["first_match_precision"])
+    row = {key: np.nan if value is None else float(value) for key, value in row.items()}  # None: undefined there
+    return dict(row, first_gap=row["own_first_precision"] - row["first_precision"])
+
+
+def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
+    """Several sets' scored frames as one, ids kept apart (two variants of one source share frame ids)."""
+    return pd.concat([f.assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id,
+                               episode_id=lambda t, i=i: f"{i}:" + t.episode_id) for i, f in enumerate(frames)],
+                     ignore_index=True)
+
+
+def leave_one_out(sets: Mapping[str, ScoredSet], boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
+    """One row per set: sigma chosen on every other set's tuning frames together, read on this set's frames
+    (``carried``); the rows sorted worst first (highest CM at the carried sigma)."""
+    if len(sets) < 2:
+        raise CarryError(f"leaving one set out needs at least two frame-sets, got {len(sets)}")
+    rows = []
+    for name, held_out in sets.items():
+        others = [s.tuning for other, s in sets.items() if other != name]
+        if any(f.empty for f in others) or held_out.reading.empty:
+            raise CarryError(f"a frame-set has no scored frames to tune or read (left out: {name})")
+        sigma = sigma_for(pooled(others))
+        rows.append(dict(set=name, **carried(held_out.reading, sigma, held_out.clusters, boot)))
+    return pd.DataFrame(rows).sort_values("cm", ascending=False, na_position="first").reset_index(drop=True)
