@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -232,3 +233,34 @@ def test_the_shipped_set_builds_offline_with_every_licence_recorded(shipped_past
     for table in ("photos.csv", "rooms.csv"):
         rows = list(csv.DictReader(open(PACKAGED_SRC / table, encoding="utf-8")))
         assert rows and all(r["licence"].startswith("CC BY 4.0") and r["source"] for r in rows), table
+
+
+def test_prepare_core50_records_each_repositorys_commit_and_attributes_both_in_the_notice(tmp_path):
+    import subprocess
+
+    from pin_match.data.sources.core50 import prepare_core50
+
+    def committed(repo: Path) -> str:
+        git = ["git", "-C", str(repo), "-c", "user.name=t", "-c", "user.email=t@t"]
+        subprocess.run([*git, "init", "-q"], check=True)
+        subprocess.run([*git, "add", "."], check=True)
+        subprocess.run([*git, "commit", "-qm", "photos"], check=True)
+        return subprocess.run([*git, "rev-parse", "HEAD"], check=True, capture_output=True, text=True).stdout.strip()
+
+    rng = np.random.default_rng(0)
+    core50, rooms = tmp_path / "core50", tmp_path / "rooms"
+    for k, colour in enumerate([(200, 40, 40), (40, 60, 200)], start=1):
+        image = rng.integers(110, 130, (128, 128, 3), dtype=np.uint8)
+        cv2.circle(image, (64, 64), 34, colour, -1)
+        atomic.write_image(core50 / "images" / f"C_01_{k:02d}_000.png", image)
+    for k in range(1, 11):
+        atomic.write_image(rooms / "ch11" / "data" / f"{k}.png", rng.integers(0, 255, (48, 64, 3), dtype=np.uint8))
+    photos_commit, rooms_commit = committed(core50), committed(rooms)
+    out = prepare_core50(core50, rooms, tmp_path / "src")
+    photos = list(csv.DictReader((out / "photos.csv").open()))
+    assert photos and {p["source"] for p in photos} == {f"github:giacomobartoli/core50_segmentation@{photos_commit}"}
+    assert {r["source"] for r in csv.DictReader((out / "rooms.csv").open())} == {
+        f"github:gaoxiang12/slambook2@{rooms_commit}"}
+    notice = (out / "NOTICE.md").read_text()
+    assert "CORe50" in notice and "TUM RGB-D" in notice and photos_commit in notice and rooms_commit in notice
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".src.")]  # no stage left behind

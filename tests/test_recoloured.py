@@ -15,6 +15,7 @@ from pin_match.data.sources.photo_folder import (
     load_photos,
     write_csv,
 )
+from pin_match.data.sources.prepare import copy_packaged_rooms
 from pin_match.data.sources.twins import add_recoloured_twins
 
 
@@ -34,6 +35,8 @@ def source(root, rows):
         mask[8:24, 8:24] = 255
         atomic.write_image(root / r["mask"], mask)
     write_csv(root / "photos.csv", [*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS], rows)
+    copy_packaged_rooms(root)
+    atomic.write_text(root / "NOTICE.md", "# Sources and licences of these photos\n\n- cups: CC BY 4.0, x/y\n")
     return root
 
 
@@ -49,11 +52,22 @@ def test_twins_for_colourful_train_instances_only(tmp_path):
     out = add_recoloured_twins(src, tmp_path / "out", hue=90)
     photos = {p.photo_id: p for p in load_photos(out)}
     assert set(photos) == {"red_0", "grey_0", "blue_0", "red_0_hue90"}  # grey has no colour, blue is val
+    notice = (out / "NOTICE.md").read_text()  # the source's attribution comes along, the derived photos are named
+    assert "cups: CC BY 4.0, x/y" in notice and "1 photos (`*_hue90`)" in notice
+    assert (out / "rooms.csv").read_text() == (src / "rooms.csv").read_text()
     twin = photos["red_0_hue90"]
     assert (twin.instance_id, twin.category, twin.split, twin.mask) == ("red_hue90", "cup", "train", "masks/red_0.png")
     image = cv2.cvtColor(cv2.imread(str(out / twin.file)), cv2.COLOR_BGR2HSV)
     assert image[16, 16, 0] == (cv2.cvtColor(np.uint8([[[200, 30, 30]]]), cv2.COLOR_RGB2HSV)[0, 0, 0] + 90) % 180
     assert image[0, 0].tolist() == cv2.cvtColor(np.uint8([[[200, 30, 30]]]), cv2.COLOR_RGB2HSV)[0, 0].tolist()
+
+
+def test_a_source_without_its_notice_is_refused_by_name(tmp_path):
+    src = source(tmp_path / "src", [row("red_0", "red", (200, 30, 30))])
+    (src / "NOTICE.md").unlink()
+    with pytest.raises(LookalikeError, match="NOTICE.md is missing"):
+        add_recoloured_twins(src, tmp_path / "out")
+    assert not (tmp_path / "out").exists()
 
 
 def test_a_source_without_splits_is_refused_by_name(tmp_path):

@@ -18,8 +18,8 @@ from pin_match.data.images import read_image
 from pin_match.data.mask_check import checked_mask
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_OPTIONAL, DataSource, register
-from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, ROOM_COLUMNS, LookalikeError, write_csv
-from pin_match.data.sources.prepare import add_photo, object_mask, staged_source
+from pin_match.data.sources.photo_folder import ROOM_COLUMNS, LookalikeError, write_csv
+from pin_match.data.sources.prepare import add_photo, checkout_commit, object_mask, write_source_folder
 
 # CORe50 (Lomonaco & Maltoni, CoRL 2017): objects 1-50, five instances per category in this order
 CORE50_CATEGORIES = ("plug_adapter", "mobile_phone", "scissors", "light_bulb", "can", "glasses", "ball", "marker",
@@ -68,9 +68,11 @@ def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | P
     ``core50_repo``: giacomobartoli/core50_segmentation (its ``images/C_<session>_<object>_<frame>.png``,
     128 px crops centred on the object). A photo whose mask fails ``checked_mask`` after its
     repair, or is in ``CORE50_BAD_MASKS``, is left out (docs/lookalike-set.md lists them).
-    ``rooms_repo``: gaoxiang12/slambook2 (``ch11/data/1..10.png``: TUM RGB-D frames).
+    ``rooms_repo``: gaoxiang12/slambook2 (``ch11/data/1..10.png``: TUM RGB-D frames). Each
+    photo's and room's source records its repository's commit, and NOTICE.md attributes both
+    (CC BY 4.0), through ``prepare.write_source_folder``.
     """
-    core50_repo, rooms_repo, out = Path(core50_repo), Path(rooms_repo), Path(out)
+    core50_repo, rooms_repo = Path(core50_repo), Path(rooms_repo)
     # only the 128 px crops: in the repository's 350 px frames (training_images/) the object is small and off
     # centre, and the border-seeded mask takes the wall instead
     sources = sorted((core50_repo / "images").glob("C_*.png"))
@@ -80,8 +82,10 @@ def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | P
     missing = [str(p) for p in rooms if not p.is_file()]
     if missing:
         raise LookalikeError(f"room photos missing: {missing}")
-    with staged_source(out, overwrite) as stage:
-        photo_rows, room_rows = [], []
+    photos_from, rooms_from = _at_commit(CORE50_SOURCE, core50_repo), _at_commit(TUM_SOURCE, rooms_repo)
+
+    def write_photos(stage: Path) -> list[dict[str, str]]:
+        rows = []
         for src in sources:
             _, session, obj, frame = src.stem.split("_")
             o = int(obj)
@@ -91,18 +95,42 @@ def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | P
             if kept is None or photo_id in CORE50_BAD_MASKS:
                 continue
             file, mask = add_photo(stage, photo_id, src.read_bytes(), src.suffix, kept)
-            photo_rows.append(dict(photo_id=photo_id, instance_id=f"core50_o{o:02d}",
-                                   category=CORE50_CATEGORIES[(o - 1) // 5],
-                                   file=file, mask=mask, source=CORE50_SOURCE,
-                                   source_path=str(src.relative_to(core50_repo)), licence=CORE50_LICENCE))
+            rows.append(dict(photo_id=photo_id, instance_id=f"core50_o{o:02d}",
+                             category=CORE50_CATEGORIES[(o - 1) // 5], file=file, mask=mask, source=photos_from,
+                             source_path=str(src.relative_to(core50_repo)), licence=CORE50_LICENCE))
+        return rows
+
+    def write_rooms(stage: Path) -> list[dict[str, str]]:
+        rows = []
         for k, src in enumerate(rooms, start=1):
             file = f"rooms/tum_fr3_office_{k:02d}.png"
             atomic.write_bytes(stage / file, src.read_bytes())
-            room_rows.append(dict(room_id=f"tum_fr3_office_{k:02d}", file=file, source=TUM_SOURCE,
-                                  source_path=str(src.relative_to(rooms_repo)), licence=TUM_LICENCE))
-        write_csv(stage / "photos.csv", PHOTO_COLUMNS, photo_rows)
-        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
-    return out
+            rows.append(dict(room_id=f"tum_fr3_office_{k:02d}", file=file, source=rooms_from,
+                             source_path=str(src.relative_to(rooms_repo)), licence=TUM_LICENCE))
+        write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
+        return rows
+
+    def describe(rows: list[dict[str, str]], room_rows: list[dict[str, str]]) -> str:
+        return f"""# Sources and licences of these photos
+
+- `photos/` ({len(rows)} photos) and the masks made from them (`masks/`, OpenCV GrabCut seeded from the
+  border, `pin_match.data.sources.prepare.object_mask`): **CORe50**, V. Lomonaco and D. Maltoni, "CORe50: a
+  New Dataset and Benchmark for Continuous Object Recognition", CoRL 2017, https://vlomonaco.github.io/core50/.
+  Licence: **CC BY 4.0** (the licence file of github.com/vlomonaco/core50). Taken from {photos_from}
+  (`images/C_<session>_<object>_<frame>.png`); each photo's original path is in `photos.csv`. Changes: file
+  names, masks added.
+- `rooms/` ({len(room_rows)} photos): **TUM RGB-D benchmark**, J. Sturm et al., "A Benchmark for the Evaluation
+  of RGB-D SLAM Systems", IROS 2012, sequence `fr3/long_office_household`. Licence: **CC BY 4.0**. Taken from
+  {rooms_from} (`ch11/data/1..10.png`).
+"""
+
+    return write_source_folder(out, write_photos, describe, write_rooms=write_rooms, overwrite=overwrite)
+
+
+def _at_commit(repo: str, checkout: Path) -> str:
+    """``repo`` at the commit ``checkout`` is at (the repository alone when it is no git checkout)."""
+    commit = checkout_commit(checkout)
+    return f"{repo}@{commit}" if commit else repo
 
 
 def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:

@@ -139,17 +139,21 @@ def notice(photos: str, rooms: list[dict[str, str]], licensor: str, licence_text
 
 def write_source_folder(out: str | Path, write_photos: Callable[[Path], list[dict[str, str]]],
                         describe: Callable[[list[dict[str, str]], list[dict[str, str]]], str], *,
+                        write_rooms: Callable[[Path], list[dict[str, str]]] = copy_packaged_rooms,
                         overwrite: bool = False) -> Path:
     """Write a source folder: ``write_photos(stage)`` writes the photos and masks and returns their rows.
 
-    Then ``photos.csv``, the shipped rooms and ``NOTICE.md`` (``describe(rows, room_rows)``); all
-    in a stage renamed onto ``out`` at the end, so a failure leaves no half-written folder.
+    Then ``photos.csv`` (the optional columns that some row has), the rooms (``write_rooms``:
+    the shipped ones unless the source brings its own) and ``NOTICE.md`` (``describe(rows,
+    room_rows)``, every photo's attribution); all in a stage renamed onto ``out`` at the end, so
+    a failure leaves no half-written folder.
     """
     out = Path(out)
     with staged_source(out, overwrite) as stage:
         rows = write_photos(stage)
-        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows)
-        room_rows = copy_packaged_rooms(stage)
+        optional = [c for c in OPTIONAL_PHOTO_COLUMNS if any(c in r for r in rows)]
+        write_csv(stage / "photos.csv", [*PHOTO_COLUMNS, *optional], rows)
+        room_rows = write_rooms(stage)
         atomic.write_text(stage / "NOTICE.md", describe(rows, room_rows))
     return out
 

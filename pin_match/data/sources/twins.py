@@ -22,8 +22,8 @@ from pin_match.data.compose import rotate_hue
 from pin_match.data.images import read_image, read_object_mask
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
-from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, LookalikeError, read_csv, write_csv
-from pin_match.data.sources.prepare import OUTPUT_COLUMNS, staged_source
+from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, ROOM_COLUMNS, LookalikeError, read_csv, write_csv
+from pin_match.data.sources.prepare import write_source_folder
 
 
 def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min_saturation: float = 60.0,
@@ -31,14 +31,22 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
     """A copy of the source folder ``src`` in which every colourful instance of ``split`` has a hue-rotated twin.
 
     The twin ``<instance>_hue<hue>`` keeps the instance's category, split, masks, source and licence
-    (its photos are derived from the instance's own, which ``source`` says). Returns ``out``.
+    (its photos are derived from the instance's own, which ``source`` says); the folder's rooms
+    come along and its NOTICE.md keeps the source's attributions and says what was derived.
+    Written through ``prepare.write_source_folder``. Returns ``out``.
     """
-    src, out = Path(src), Path(out)
+    src = Path(src)
     rows = read_csv(src / "photos.csv", PHOTO_COLUMNS)
     if "split" not in rows[0]:
         raise LookalikeError(f"{src / 'photos.csv'} has no split column: twins need each photo's split")
-    with staged_source(out, overwrite) as stage:
-        shutil.copytree(src, stage, dirs_exist_ok=True)
+    notice_file = src / "NOTICE.md"
+    if not notice_file.is_file():
+        raise LookalikeError(f"{notice_file} is missing: the twins are derived from its photos, whose attribution "
+                             "must come along")
+
+    def write_photos(stage: Path) -> list[dict[str, str]]:
+        for folder in ("photos", "masks"):
+            shutil.copytree(src / folder, stage / folder)
         twins = []
         for instance in sorted({r["instance_id"] for r in rows if r["split"] == split}):
             photos = [r for r in rows if r["instance_id"] == instance]
@@ -53,8 +61,21 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
                 twins.append({**r, "photo_id": twin, "instance_id": f"{instance}_hue{hue}",
                               "file": f"photos/{twin}.png",
                               "source": f"{r['source']} (hue rotated by {hue} under the mask by pin_match)"})
-        write_csv(stage / "photos.csv", OUTPUT_COLUMNS, rows + twins)
-    return out
+        return rows + twins
+
+    def write_rooms(stage: Path) -> list[dict[str, str]]:
+        room_rows = read_csv(src / "rooms.csv", ROOM_COLUMNS)
+        shutil.copytree(src / "rooms", stage / "rooms")
+        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        return room_rows
+
+    def describe(all_rows: list[dict[str, str]], room_rows: list[dict[str, str]]) -> str:
+        derived = len(all_rows) - len(rows)
+        return (notice_file.read_text(encoding="utf-8").rstrip() + f"\n\n## Derived by pin_match\n\n{derived} photos "
+                f"(`*_hue{hue}`) are the {split} photos of colourful instances with the hue rotated by {hue} under "
+                "their masks; they keep their originals' licence and attribution above.\n")
+
+    return write_source_folder(out, write_photos, describe, write_rooms=write_rooms, overwrite=overwrite)
 
 
 SOURCE = register(DataSource(
