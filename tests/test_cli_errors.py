@@ -60,6 +60,9 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["fit", "fusion", fs, "--component", "no-such-matcher", "--out", f"{tmp}/fusion.json"],
         ["fit", "verifier", missing, "--out", f"{tmp}/verify.json"],
         ["fit", "verifier-report", "--train", missing, "--eval", fs],
+        ["carry", fs, "--matcher", "color"],  # one frame-set: nothing to leave out
+        ["carry", fs, missing, "--matcher", "color", "--cache", f"{tmp}/scores"],
+        ["carry", fs, f"{fs}:no-such-split", "--matcher", "color", "--cache", f"{tmp}/scores"],
     ]
 
 

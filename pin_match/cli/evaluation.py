@@ -142,15 +142,21 @@ def _cmd_carry(a: argparse.Namespace) -> None:
     from pin_match.evaluation.metrics import Bootstrap
     from pin_match.scoring import score
 
+    if len(a.framesets) < 2:
+        raise UsageError(f"carry needs at least two frame-sets (one is left out at a time), got {a.framesets}")
     matcher = create_matcher(a.matcher, **matcher_overrides(a))
-    sets = {}
+    contexts = {}  # every frame-set loaded and its split checked before anything is scored
     for item in a.framesets:
         path, _, split = item.partition(":")
         ctx = EvalContext(FrameSet.load(path), Bootstrap(n_boot=a.bootstrap))
         splits = set(ctx.fs.episodes.split)
+        reading = split or ("val" if "val" in splits else None)
+        ctx.fs.split(reading)  # a split the set lacks is named here
+        contexts[item] = (ctx, "train" if "train" in splits else None, reading)
+    sets = {}
+    for item, (ctx, tuning, reading) in contexts.items():
         table = score(ctx.fs, matcher, out=a.cache, run=run_options(a))
-        sets[item] = ScoredSet(tuning=ctx.scored(table, "train" if "train" in splits else None),
-                               reading=ctx.scored(table, split or ("val" if "val" in splits else None)),
+        sets[item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
                                clusters=instance_clusters(ctx.fs.episodes))
     rows = leave_one_out(sets, Bootstrap(n_boot=a.bootstrap))
     columns = ["set", "auroc_same", "sigma", "cm", "cm_low", "cm_high", "first_precision", "own_sigma", "own_cm",

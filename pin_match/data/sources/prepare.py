@@ -35,7 +35,6 @@ from pin_match.data.sources.photo_folder import (
     write_csv,
 )
 
-OUTPUT_COLUMNS = (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS)
 JPEG_QUALITY = 95  # photos a source re-encodes (cropped, recoloured) are stored at this quality
 
 
