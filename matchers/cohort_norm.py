@@ -1,0 +1,126 @@
+"""``cohort-norm``: any matcher's score read against a cohort of other real instances (adaptive Z-norm).
+
+At ``prepare`` the ``base`` matcher, prepared for the target, scores every image of the cohort
+(images of other real objects, each one frame); the ``k`` highest of those scores give the target
+its own impostor scale (``contract.cohort.Impostors``: ``k`` 0 takes them all, plain Z-norm), and
+every score the base returns for a frame, its crops, points and boxes is read against it
+(``normalised``: 0.5 is the cohort's top-k mean, in [0, 1] and monotone, so the base's ranking
+within a target is kept and its points above sigma are the same points). The default cohort is
+the 59 CORe50 photos shipped with pin_match (10 household categories, CC BY 4.0); ``weights=DIR``
+names another folder of images, whose content enters the id. What it assumes: a target's
+look-alikes in the house score like its closest cohort members; where the cohort holds nothing
+like them (another domain, other categories), the scale is a generic one (docs/instance-matchers.md).
+Cost: a base pass per cohort image at every ``prepare``, nothing more a frame.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+
+from pin_match.contract import (
+    ConfigError,
+    MatcherConfig,
+    MatcherError,
+    MatchResult,
+    Modality,
+    Target,
+    WeightsError,
+    WeightsSpec,
+    register_matcher,
+    weights_field,
+)
+from pin_match.contract.cohort import Impostors
+from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
+
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+COHORT_BATCH = 8
+
+
+@dataclass
+class CohortNormConfig(MatcherConfig):
+    """The base matcher, how many cohort members set the scale; ``weights`` is the cohort's folder of images."""
+
+    weights: str | None = weights_field()
+    base: str = field(default="verify", metadata={"help": "the matcher whose scores are normalised"})
+    base_cfg: dict[str, Any] = part_cfg_field("base")
+    k: int = field(default=5, metadata={"help": "cohort members with the highest scores that set the scale "
+                                                "(adaptive Z-norm); 0: all of them (Z-norm)"})
+    min_std: float = field(default=0.25, metadata={"help": "smallest spread of the cohort's scores"})
+    probability: bool = field(default=True, metadata={
+        "help": "the base's score is a probability (normalised in the logit domain); false: as it is"})
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.k < 0 or self.min_std <= 0:
+            raise ConfigError(f"{type(self).__name__}: k must be >= 0 and min_std > 0")
+
+
+@register_matcher("cohort-norm")
+class CohortNormMatcher(CompositeMatcher):
+    """A base matcher's scores on the scale of its own scores of a cohort of other real instances."""
+
+    Config = CohortNormConfig
+    modality = Modality.VISUAL
+    weights_spec = WeightsSpec(package="pin_match", package_file="data/sources/lookalike_src/photos",
+                               distribution="pin-match",
+                               license="CC BY 4.0 (CORe50, Lomonaco & Maltoni 2017; the folder's NOTICE.md)")
+    default_sigma = 0.5  # the cohort's top-k mean; how far it carries: docs/instance-matchers.md
+    version = 1
+    paper = ("cohort score normalisation of speaker verification: Z-norm (Auckenthaler et al., DSP 2000), "
+             "adaptive cohort (Sturim and Reynolds, ICASSP 2005)")
+
+    def __init__(self, cfg: MatcherConfig | None = None) -> None:
+        super().__init__(cfg)
+        self.base = self.add_part("base", self.cfg.base, self.cfg.base_cfg)
+        self.require_visual()
+        self._impostors: Impostors | None = None
+
+    @cached_property
+    def cohort(self) -> list[np.ndarray]:
+        """The cohort's images, RGB, read once per matcher."""
+        folder = Path(self.cfg.weights).expanduser() if self.cfg.weights else self.weights_spec.carried_file()
+        files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
+        if not files:
+            raise WeightsError(f"matcher {self.display_name}: the cohort folder {folder} holds no images "
+                               f"({', '.join(IMAGE_SUFFIXES)})")
+        images = []
+        for path in files:
+            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
+            if bgr is None:
+                raise WeightsError(f"matcher {self.display_name}: cannot read the cohort image {path}")
+            images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+        return images
+
+    def _prepare(self, target: Target) -> None:
+        super()._prepare(target)
+        scores = [r.score for i in range(0, len(self.cohort), COHORT_BATCH)
+                  for r in self.base.match_batch(self.cohort[i:i + COHORT_BATCH])]
+        cfg = self.cfg
+        self._impostors = Impostors.of(scores, k=cfg.k, min_std=cfg.min_std, probability=cfg.probability)
+
+    @property
+    def impostors(self) -> Impostors:
+        """The prepared target's cohort statistics (what the report shows beside its scores)."""
+        if self._impostors is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) first")
+        return self._impostors
+
+    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+        norm = self.impostors.normalised
+        out = []
+        for r in self.base.match_batch(images):
+            out.append(dataclasses.replace(
+                r, score=float(norm(r.score)), point_scores=_mapped(norm, r.scores_of_points()),
+                crop_scores=_mapped(norm, r.crop_scores), box_scores=_mapped(norm, r.box_scores)))
+        return out
+
+
+def _mapped(norm, values: np.ndarray | None) -> np.ndarray | None:
+    return None if values is None else np.asarray(norm(np.asarray(values, np.float64)), np.float32)
