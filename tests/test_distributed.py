@@ -265,7 +265,7 @@ def test_candidate_signals_and_a_matcher_group_on_the_cluster_are_the_local_ones
     on_dask = candidate_table(tiny_frameset, verify, out=tmp_path / "cluster", run=RunOptions(client=client))
     # the same rows; a network's float sums may differ in the last bits with the thread count a worker runs
     assert len(local) >= len(tiny_frameset.frames)
-    pd.testing.assert_frame_equal(on_dask, local, check_exact=False, rtol=1e-5, atol=1e-6)
+    pd.testing.assert_frame_equal(on_dask, local, check_exact=False, rtol=1e-4, atol=1e-5)
     group = ["color", "sift"]
     score_many(tiny_frameset, group, out=tmp_path / "group_local", run=QUIET)
     score_many(tiny_frameset, group, out=tmp_path / "group_dask", run=RunOptions(client=client))

@@ -65,7 +65,8 @@ def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
 
 def leave_one_out(sets: Mapping[str, ScoredSet], boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
     """One row per set: sigma chosen on every other set's tuning frames together, read on this set's frames
-    (``carried``); the rows sorted worst first (highest CM at the carried sigma)."""
+    (``carried``); the rows sorted worst first: a set where the carried sigma matches nothing (CM undefined), then
+    the highest CM."""
     if len(sets) < 2:
         raise CarryError(f"leaving one set out needs at least two frame-sets, got {len(sets)}")
     rows = []
