@@ -69,6 +69,10 @@ class EvalContext:
         """``frame_labels`` of the frame-set."""
         return frame_labels(self.fs)
 
+    def split_labels(self, split: str | None) -> pd.DataFrame:
+        """``labels`` of one split's frames (all of them for None)."""
+        return self.labels if split in (None, "all") else self.labels[self.labels.split == split]
+
     @cached_property
     def clusters(self) -> dict[str, str]:
         """Each episode's resampling unit for every interval of the run: its target instance."""

@@ -48,7 +48,7 @@ def component_scores(fs: FrameSet, components: list[Component], split: str, out:
     matchers = [create_matcher(name, **overrides) for name, overrides, _ in components]
     tables = score_many(fs, matchers, split=split, out=out, run=run)
     ctx = EvalContext(fs)
-    labels = ctx.labels[ctx.labels.split == split].reset_index(drop=True)
+    labels = ctx.split_labels(split).reset_index(drop=True)
     records = []
     for i, ((name, _, transform), matcher, table) in enumerate(zip(components, matchers, tables)):
         scored = scored_frames(labels, table)

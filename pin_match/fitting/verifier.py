@@ -29,6 +29,7 @@ import pin_match
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.carry import pooled
 from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import (
@@ -189,17 +190,13 @@ def fit_spec(matcher: VerifyMatcher, sets: Sequence[tuple[FrameSet, pd.DataFrame
     labels, a candidate table holding those signals); a FitError when there is nothing to fit on."""
     if not sets:
         raise FitError("verifier fit: no frame-set to fit on")
-    tables, labels, sources = [], [], []
-    for i, (fs, fs_labels, table) in enumerate(sets):
-        # two variants of one source share frame ids: the set's position keeps them apart
-        tables.append(table[table.split == split].assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
-        labels.append(fs_labels.assign(frame_id=lambda t, i=i: f"{i}:" + t.frame_id))
-        sources.append(dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint))
-    candidates = pd.concat(tables, ignore_index=True)
-    if candidates.empty:
+    tables = [table[table.split == split] for _, _, table in sets]
+    if all(t.empty for t in tables):
         roots = ", ".join(str(fs.root) for fs, _, _ in sets)
         raise FitError(f"verifier fit: no candidate in split {split!r} of {roots}")
-    used, weights, counts = candidate_classes(candidates, pd.concat(labels))
+    # two variants of one source share frame ids: ``pooled`` keeps them apart by the set's position
+    used, weights, counts = candidate_classes(pooled(tables), pooled([fs_labels for _, fs_labels, _ in sets]))
+    sources = [dict(frameset=fs.manifest.get("name", str(fs.root)), fingerprint=fs.fingerprint) for fs, _, _ in sets]
     return dict(format=VERIFIER_FORMAT, version=VERIFIER_VERSION, signals_id=matcher.signals_id,
                 **fit_weights(used, weights, matcher.cfg.signals, matcher.cfg.color_gate, l2),
                 fitted_on=dict(framesets=sources, split=split, candidates=len(used), classes=counts, l2=l2,

@@ -88,8 +88,7 @@ class Sets:
         def one(path: str, split: str | None) -> tuple[FrameSet, pd.DataFrame, pd.DataFrame]:
             ctx = contexts.setdefault(path, EvalContext(FrameSet.load(path)))
             fs = ctx.fs.split(split)
-            labels = ctx.labels if split is None else ctx.labels[ctx.labels.split == split]
-            return fs, labels, candidate_table(fs, base, out=features, run=run)
+            return fs, ctx.split_labels(split), candidate_table(fs, base, out=features, run=run)
 
         if not train:
             raise FitError("verifier report: no development frame-set to fit and tune on (--train)")

@@ -20,7 +20,7 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import COLUMNS, arrow_schema, as_stored, decode_meta, encode_meta
+from pin_match.scoring.schema import COLUMNS, as_stored, decode_meta, encode_meta
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 
@@ -90,15 +90,15 @@ def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard |
     return as_stored(meta)
 
 
-def assemble(final: Path, chunk_files: list[Path], meta: dict, schema: Any = None) -> None:
+def assemble(final: Path, chunk_files: list[Path], meta: dict, schema: Any) -> None:
     """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata.
 
     The chunks have passed ``schema.chunk_rows`` (or were just written), so they hold ``schema``'s
-    types (the score table's by default).
+    types (the product's: ``product.Product.schema``).
     """
     import pyarrow.parquet as pq
 
-    schema = (schema if schema is not None else arrow_schema()).with_metadata(encode_meta(meta))
+    schema = schema.with_metadata(encode_meta(meta))
     with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
         for path in chunk_files:
             writer.write_table(pq.read_table(path).replace_schema_metadata(schema.metadata))

@@ -29,8 +29,8 @@ COLUMNS = list(_TYPES)
 META_KEY = b"pin_match"
 
 
-def arrow_schema(meta: dict | None = None) -> Any:
-    """The columns' Arrow types, with ``meta`` as the table's metadata when given.
+def arrow_schema() -> Any:
+    """The score table's columns' Arrow types.
 
     Text is ``large_string`` whichever pandas version built the rows, so every chunk of a table
     has one type; lists name their values ``element`` as parquet stores them, so the schema
@@ -40,8 +40,7 @@ def arrow_schema(meta: dict | None = None) -> Any:
 
     arrow = {_TEXT: pa.large_string(), _INT: pa.int64(), _FLOAT: pa.float64(),
              _FLOATS: pa.list_(pa.field("element", pa.float32()))}
-    schema = pa.schema([(name, arrow[kind]) for name, kind in _TYPES.items()])
-    return schema if meta is None else schema.with_metadata(encode_meta(meta))
+    return pa.schema([(name, arrow[kind]) for name, kind in _TYPES.items()])
 
 
 def episode_rows(episode_id: str, split: str, frame_ids: list[str], steps: np.ndarray,
@@ -78,9 +77,8 @@ def as_stored(meta: dict) -> dict:
     return json.loads(encode_meta(meta)[META_KEY])
 
 
-def mismatch(schema: Any, expected: Any = None) -> str | None:
-    """Why an Arrow schema is not ``expected`` (the score table's by default), ignoring metadata; None when it is."""
-    expected = expected if expected is not None else arrow_schema()
+def mismatch(schema: Any, expected: Any) -> str | None:
+    """Why an Arrow schema is not ``expected`` (ignoring metadata), or None when it is."""
     if schema.names != expected.names:
         return f"columns {schema.names}, expected {expected.names}"
     for field in expected:
