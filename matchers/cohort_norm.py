@@ -71,7 +71,9 @@ class CohortNormMatcher(CompositeMatcher):
     weights_spec = WeightsSpec(package="pin_match", package_file="data/sources/lookalike_src/photos",
                                distribution="pin-match",
                                license="CC BY 4.0 (CORe50, Lomonaco & Maltoni 2017; the folder's NOTICE.md)")
-    default_sigma = 0.5  # the cohort's top-k mean; how far it carries: docs/instance-matchers.md
+    # untuned: the cohort's top-k mean (sigmas chosen leaving one set out were about 0.99 with verify as base;
+    # docs/instance-matchers.md): tune it on frames like the agent's
+    default_sigma = 0.5
     version = 1
     paper = ("cohort score normalisation of speaker verification: Z-norm (Auckenthaler et al., DSP 2000), "
              "adaptive cohort (Sturim and Reynolds, ICASSP 2005)")
