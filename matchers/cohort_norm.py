@@ -2,7 +2,7 @@
 
 At ``prepare`` the ``base`` matcher, prepared for the target, scores every image of the cohort
 (images of other real objects, each one frame); the ``k`` highest of those scores give the target
-its own impostor scale (``contract.cohort.Impostors``: ``k`` 0 takes them all, plain Z-norm), and
+its own impostor scale (``contract.cohort.TargetCohort``: ``k`` 0 takes them all, plain Z-norm), and
 every score the base returns for a frame, its crops, points and boxes is read against it
 (``normalised``: 0.5 is the cohort's top-k mean, in [0, 1] and monotone, so the base's ranking
 within a target is kept and its points above sigma are the same points). The default cohort is
@@ -10,7 +10,9 @@ the 59 CORe50 photos shipped with pin_match (10 household categories, CC BY 4.0)
 names another folder of images, whose content enters the id. What it assumes: a target's
 look-alikes in the house score like its closest cohort members; where the cohort holds nothing
 like them (another domain, other categories), the scale is a generic one (docs/instance-matchers.md).
-Cost: a base pass per cohort image at every ``prepare``, nothing more a frame.
+Each target's cohort (every member's score, the scale) goes into the score table as its notes,
+so the report shows it beside the target's scores. Cost: a base pass per cohort image at every
+``prepare``, nothing more a frame.
 """
 
 from __future__ import annotations
@@ -36,7 +38,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.contract.cohort import Impostors
+from pin_match.contract.cohort import TargetCohort
 from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
@@ -82,40 +84,56 @@ class CohortNormMatcher(CompositeMatcher):
         super().__init__(cfg)
         self.base = self.add_part("base", self.cfg.base, self.cfg.base_cfg)
         self.require_visual()
-        self._impostors: Impostors | None = None
+        self._cohort: TargetCohort | None = None
+
+    @property
+    def cohort_folder(self) -> Path:
+        return Path(self.cfg.weights).expanduser() if self.cfg.weights else self.weights_spec.carried_file()
 
     @cached_property
-    def cohort(self) -> list[np.ndarray]:
-        """The cohort's images, RGB, read once per matcher."""
-        folder = Path(self.cfg.weights).expanduser() if self.cfg.weights else self.weights_spec.carried_file()
+    def cohort_images(self) -> dict[str, np.ndarray]:
+        """The cohort's images by file name, RGB, read once per matcher."""
+        folder = self.cohort_folder
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
         if not files:
             raise WeightsError(f"matcher {self.display_name}: the cohort folder {folder} holds no images "
                                f"({', '.join(IMAGE_SUFFIXES)})")
-        images = []
+        images = {}
         for path in files:
             bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
             if bgr is None:
                 raise WeightsError(f"matcher {self.display_name}: cannot read the cohort image {path}")
-            images.append(cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB))
+            images[path.name] = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
         return images
+
+    @property
+    def score_scale(self) -> str:
+        how = f"adaptive Z-norm over the {self.cfg.k} closest members" if self.cfg.k else "Z-norm over all members"
+        where = self.cfg.weights or "the CORe50 photos shipped with pin_match"
+        return (f"cohort-normalised: {self.cfg.base}'s score read against its scores of a cohort of other objects "
+                f"({how}; cohort {where}); 0.5 is the cohort's mean")
 
     def _prepare(self, target: Target) -> None:
         super()._prepare(target)
-        scores = [r.score for i in range(0, len(self.cohort), COHORT_BATCH)
-                  for r in self.base.match_batch(self.cohort[i:i + COHORT_BATCH])]
+        names, images = list(self.cohort_images), list(self.cohort_images.values())
+        scores = [r.score for i in range(0, len(images), COHORT_BATCH)
+                  for r in self.base.match_batch(images[i:i + COHORT_BATCH])]
         cfg = self.cfg
-        self._impostors = Impostors.of(scores, k=cfg.k, min_std=cfg.min_std, probability=cfg.probability)
+        self._cohort = TargetCohort.of(str(self.cohort_folder), names, scores, k=cfg.k, min_std=cfg.min_std,
+                                       probability=cfg.probability)
 
     @property
-    def impostors(self) -> Impostors:
-        """The prepared target's cohort statistics (what the report shows beside its scores)."""
-        if self._impostors is None:
+    def cohort(self) -> TargetCohort:
+        """The prepared target's cohort: its members' scores and the scale they give."""
+        if self._cohort is None:
             raise MatcherError(f"matcher {self.display_name}: call prepare(target) first")
-        return self._impostors
+        return self._cohort
+
+    def target_notes(self) -> dict[str, Any]:
+        return self.cohort.as_notes()
 
     def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
-        norm = self.impostors.normalised
+        norm = self.cohort.impostors.normalised
         out = []
         for r in self.base.match_batch(images):
             out.append(dataclasses.replace(

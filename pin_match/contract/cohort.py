@@ -9,7 +9,10 @@ reference views are the enrolment and each cohort member, an image of another re
 is scored by the matcher prepared for the target; ``Impostors`` keeps their statistics and
 ``normalised`` maps a score to ``sigmoid((g(score) - mean) / std)``, ``g`` the logit for a
 matcher whose score is a probability (identity otherwise), so the result is again in [0, 1] and
-one sigma can be set on it. T-norm and S-norm also need every candidate scored against every
+one sigma can be set on it. ``TargetCohort`` keeps one target's cohort (every member's score, the
+scale they give, where the images are) as the notes a score table stores per target, from which
+the report shows where the scale came from and any other ``k`` can be read again without a model.
+T-norm and S-norm also need every candidate scored against every
 cohort member, a matcher pass per member per frame, which no frame budget allows: not offered.
 
 Pure numpy, for any matcher (``matchers/cohort_norm.py`` wraps one).
@@ -56,3 +59,52 @@ class Impostors:
         raw = logit(score) if self.probability else np.asarray(score, np.float64)
         z = (raw - self.mean) / self.std
         return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
+
+
+@dataclass(frozen=True)
+class TargetCohort:
+    """One target's cohort: each member's raw score, highest first, and the scale its ``k`` closest give."""
+
+    folder: str
+    members: tuple[tuple[str, float], ...]  # (image file name, the matcher's raw score of it), highest score first
+    k: int
+    impostors: Impostors
+
+    @classmethod
+    def of(cls, folder: str, names: Sequence[str], scores: Sequence[float], *, k: int, min_std: float,
+           probability: bool) -> TargetCohort:
+        if len(names) != len(scores):
+            raise ValueError(f"{len(names)} cohort names for {len(scores)} scores")
+        order = np.argsort(-np.asarray(scores, np.float64), kind="stable")
+        members = tuple((str(names[i]), float(scores[i])) for i in order)
+        return cls(str(folder), members, k, Impostors.of(scores, k=k, min_std=min_std, probability=probability))
+
+    @property
+    def closest(self) -> tuple[tuple[str, float], ...]:
+        """The members that set the scale: the ``k`` highest-scoring (all of them for ``k`` 0)."""
+        return self.members[:self.k] if self.k else self.members
+
+    @property
+    def midpoint(self) -> float:
+        """The raw score that maps to 0.5: the cohort's (top-k) mean, back in the score's own units."""
+        mean = self.impostors.mean
+        return float(1.0 / (1.0 + np.exp(-mean))) if self.impostors.probability else mean
+
+    def as_notes(self) -> dict:
+        """JSON values, as ``Matcher.target_notes`` hands them to the score table."""
+        imp = self.impostors
+        return dict(cohort=dict(folder=self.folder, k=self.k, mean=imp.mean, std=imp.std, probability=imp.probability,
+                                members=[[name, score] for name, score in self.members]))
+
+    @classmethod
+    def from_notes(cls, notes: dict) -> TargetCohort | None:
+        """The cohort a table stored for a target, or None when the notes hold none (a matcher without one)."""
+        if "cohort" not in notes:
+            return None
+        try:
+            c = notes["cohort"]
+            members = tuple((str(name), float(score)) for name, score in c["members"])
+            return cls(str(c["folder"]), members, int(c["k"]),
+                       Impostors(float(c["mean"]), float(c["std"]), bool(c["probability"])))
+        except (KeyError, TypeError, ValueError) as exc:
+            raise ValueError(f"damaged cohort notes ({type(exc).__name__}: {exc})") from exc

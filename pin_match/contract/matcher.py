@@ -250,6 +250,21 @@ class Matcher(ABC):
         """The matchers a composite is built from, by role (their weights are listed by ``pin-match list``)."""
         return {}
 
+    @property
+    def score_scale(self) -> str:
+        """What a score's level means: a short name, a colon, then how it was read (``pin-match list`` shows the
+        name, the report the whole; every table stores it). A raw score's level may differ per target, so
+        one sigma may not carry to a house nobody tuned it on."""
+        return "raw: the matcher's own score, not normalised per target"
+
+    def target_notes(self) -> dict[str, Any]:
+        """What ``prepare`` derived for the current target that explains the level of its scores (JSON values).
+
+        The scoring engine stores it per target in the score table and the report shows it beside
+        the target's scores (``cohort-norm``: the cohort's scores and scale). Empty by default.
+        """
+        return {}
+
     def embed_reference(self, view: np.ndarray) -> np.ndarray:
         """A global embedding of one RGBA reference (the paper's similarity analysis)."""
         raise MatcherError(f"matcher {self.display_name} has no global embedding for the similarity analysis")

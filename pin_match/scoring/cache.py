@@ -20,7 +20,7 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import COLUMNS, as_stored, decode_meta, encode_meta
+from pin_match.scoring.schema import COLUMNS, TARGETS, as_stored, chunk_notes, decode_meta, encode_meta
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 
@@ -86,7 +86,8 @@ def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard |
                 config=matcher.cfg.hashed_dict(), frameset_fingerprint=fs.fingerprint,
                 frameset_name=fs.manifest.get("name", ""), split=split or "all",
                 shard=str(shard) if shard else None, default_sigma=matcher.default_sigma,
-                modality=matcher.modality.value, pin_match_version=pin_match.__version__)
+                score_scale=matcher.score_scale, modality=matcher.modality.value,
+                pin_match_version=pin_match.__version__)
     return as_stored(meta)
 
 
@@ -94,11 +95,15 @@ def assemble(final: Path, chunk_files: list[Path], meta: dict, schema: Any) -> N
     """Stream the chunks, in canonical (episode, step) order, into one parquet file carrying the metadata.
 
     The chunks have passed ``schema.chunk_rows`` (or were just written), so they hold ``schema``'s
-    types (the product's: ``product.Product.schema``).
+    types (the product's: ``product.Product.schema``). The notes of their targets
+    (``Matcher.target_notes``) are gathered under the metadata's ``targets``.
     """
     import pyarrow.parquet as pq
 
-    schema = schema.with_metadata(encode_meta(meta))
+    notes = {}
+    for path in chunk_files:
+        notes.update(chunk_notes(pq.read_schema(path).metadata))
+    schema = schema.with_metadata(encode_meta({**meta, TARGETS: notes} if notes else meta))
     with atomic.atomic_path(final) as tmp, pq.ParquetWriter(tmp, schema) as writer:
         for path in chunk_files:
             writer.write_table(pq.read_table(path).replace_schema_metadata(schema.metadata))
@@ -146,6 +151,9 @@ def merge(parts: list[str | Path], out: str | Path) -> ScoreTable:
     frames = canonical_order(frames)
     counts = {str(t.meta.get("shard")) for t in tables}
     meta = dict(first, shard=None, merged_from=sorted(counts))
+    notes = {target: n for t in tables for target, n in t.target_notes.items()}
+    if notes:
+        meta[TARGETS] = notes
     table = ScoreTable(frames[COLUMNS], meta)
     table.write(out)
     return table

@@ -84,8 +84,11 @@ def score_into_chunks(fs: FrameSet, prepared: PreparedMatchers, outputs: Sequenc
         return n_frames
     rows = score_episode(fs, prepared, [outputs[i].product for i in pending], episode_id, pending,
                          batch_size=batch_size, bar=bar)
-    for i, part in zip(pending, rows):
-        write_chunk(outputs[i].chunks, episode_id, part, outputs[i].product.schema())
+    target_id = fs.episode(episode_id).target_object_id
+    for i, part in zip(pending, rows):  # the matchers are still prepared for the episode's target
+        product = outputs[i].product
+        write_chunk(outputs[i].chunks, episode_id, part, product.schema(),
+                    {target_id: product.notes(prepared.matchers[i])})
     return n_frames
 
 

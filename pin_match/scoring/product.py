@@ -50,6 +50,10 @@ class Product:
     def schema(self) -> Any:
         return arrow_schema()
 
+    def notes(self, matcher: Matcher) -> dict:
+        """What the matcher, prepared for an episode's target, says of it (stored per target with the table)."""
+        return matcher.target_notes()
+
     def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
         return table_meta(matcher, fs, split, shard)
 

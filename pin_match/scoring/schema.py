@@ -27,6 +27,8 @@ _TYPES = {"frame_id": _TEXT, "episode_id": _TEXT, "step": _INT, "split": _TEXT, 
           "crop_scores": _FLOATS, "points_x": _FLOATS, "points_y": _FLOATS, "point_scores": _FLOATS}
 COLUMNS = list(_TYPES)
 META_KEY = b"pin_match"
+NOTES_KEY = b"pin_match_target_notes"  # a chunk's: {target id: what prepare derived} (``Matcher.target_notes``)
+TARGETS = "targets"  # the table's metadata key gathering its chunks' notes
 
 
 def arrow_schema() -> Any:
@@ -72,6 +74,11 @@ def decode_meta(schema_metadata: dict | None) -> dict | None:
     return json.loads(raw) if raw else None
 
 
+def produced_by(stored: dict | None, expected: dict) -> bool:
+    """Whether a table's stored metadata is ``expected``'s: the run's own, apart from the targets' notes it gathered."""
+    return stored is not None and {k: v for k, v in stored.items() if k != TARGETS} == expected
+
+
 def as_stored(meta: dict) -> dict:
     """``meta`` as it reads back from a table (tuples become lists, paths text), so a cached table compares equal."""
     return json.loads(encode_meta(meta)[META_KEY])
@@ -92,12 +99,21 @@ def chunk_path(chunks: Path, episode_id: str) -> Path:
     return Path(chunks) / f"{episode_id}.parquet"
 
 
-def write_chunk(chunks: Path, episode_id: str, rows: pd.DataFrame, schema: Any) -> None:
-    """Write the episode's rows atomically, in the types of ``schema`` (replacing a damaged chunk)."""
+def write_chunk(chunks: Path, episode_id: str, rows: pd.DataFrame, schema: Any, notes: dict) -> None:
+    """Write the episode's rows atomically, in the types of ``schema`` (replacing a damaged chunk), with ``notes``
+    ({target id: notes}; nothing when the matcher has none) in its metadata."""
     import pyarrow as pa
 
+    if any(notes.values()):
+        schema = schema.with_metadata({NOTES_KEY: json.dumps(notes, sort_keys=True).encode()})
     atomic.write_parquet(chunk_path(chunks, episode_id),
                          pa.Table.from_pandas(rows[schema.names], schema=schema, preserve_index=False))
+
+
+def chunk_notes(schema_metadata: dict | None) -> dict:
+    """The target notes a chunk carries ({} for none)."""
+    raw = (schema_metadata or {}).get(NOTES_KEY)
+    return json.loads(raw) if raw else {}
 
 
 def chunk_rows(chunks: Path, episode_id: str, schema: Any, *, say_why: bool = True) -> int | None:

@@ -16,7 +16,7 @@ import pandas as pd
 from pin_match import atomic
 from pin_match.contract.matcher import points_above
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import COLUMNS, decode_meta, encode_meta
+from pin_match.scoring.schema import COLUMNS, TARGETS, decode_meta, encode_meta
 
 
 class ScoreTableError(PinMatchError, ValueError):
@@ -35,6 +35,11 @@ class ScoreTable:
     @property
     def matcher_id(self) -> str:
         return self.meta.get("matcher_id", self.matcher)
+
+    @property
+    def target_notes(self) -> dict[str, dict]:
+        """Per target id, what the matcher's ``prepare`` derived for it (``Matcher.target_notes``; often nothing)."""
+        return self.meta.get(TARGETS, {})
 
     def points(self, frame_id: str, sigma: float) -> np.ndarray:
         """(K, 2) frame coordinates of the target under threshold sigma."""
