@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import dataclasses
 from dataclasses import dataclass, field
-from functools import cached_property
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -90,21 +90,16 @@ class CohortNormMatcher(CompositeMatcher):
     def cohort_folder(self) -> Path:
         return Path(self.cfg.weights).expanduser() if self.cfg.weights else self.weights_spec.carried_file()
 
-    @cached_property
+    @property
     def cohort_images(self) -> dict[str, np.ndarray]:
-        """The cohort's images by file name, RGB, read once per matcher."""
+        """The cohort's images by file name, RGB: read once per process and folder state, so every variant of
+        this matcher scores the same buffers and a run's shared pass scores them once (``contract.shared``)."""
         folder = self.cohort_folder
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
         if not files:
             raise WeightsError(f"matcher {self.display_name}: the cohort folder {folder} holds no images "
                                f"({', '.join(IMAGE_SUFFIXES)})")
-        images = {}
-        for path in files:
-            bgr = cv2.imread(str(path), cv2.IMREAD_COLOR)
-            if bgr is None:
-                raise WeightsError(f"matcher {self.display_name}: cannot read the cohort image {path}")
-            images[path.name] = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
-        return images
+        return _read_cohort(tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files))
 
     @property
     def score_scale(self) -> str:
@@ -140,6 +135,20 @@ class CohortNormMatcher(CompositeMatcher):
                 r, score=float(norm(r.score)), point_scores=_mapped(norm, r.scores_of_points()),
                 crop_scores=_mapped(norm, r.crop_scores), box_scores=_mapped(norm, r.box_scores)))
         return out
+
+
+@lru_cache(maxsize=4)
+def _read_cohort(files: tuple[tuple[str, int, int], ...]) -> dict[str, np.ndarray]:
+    """The images of ``files`` (path, modification time, size) by file name; read-only, as they are shared."""
+    images = {}
+    for path, _, _ in files:
+        bgr = cv2.imread(path, cv2.IMREAD_COLOR)
+        if bgr is None:
+            raise WeightsError(f"matcher cohort-norm: cannot read the cohort image {path}")
+        rgb = cv2.cvtColor(bgr, cv2.COLOR_BGR2RGB)
+        rgb.flags.writeable = False
+        images[Path(path).name] = rgb
+    return images
 
 
 def _mapped(norm, values: np.ndarray | None) -> np.ndarray | None:

@@ -6,7 +6,16 @@ import numpy as np
 import pytest
 
 from pin_match.cli import main
-from pin_match.evaluation.carry import CarryError, ScoredSet, carried, leave_one_out, pooled
+from pin_match.evaluation.carry import (
+    CarryError,
+    ScoredSet,
+    carried,
+    carry_risk,
+    chosen_and_carried,
+    headline,
+    leave_one_out,
+    pooled,
+)
 from pin_match.evaluation.intervals import instance_clusters
 from pin_match.evaluation.labels import frame_labels
 from pin_match.evaluation.metrics import Bootstrap
@@ -63,3 +72,45 @@ def test_carry_command_scores_each_set_and_prints_the_rows(tiny_frameset, tmp_pa
     out = capsys.readouterr().out
     assert code in (0, None) and "sigma chosen on every other set" in out and f"{twin}:val" in out
     assert (tmp_path / "carry.json").exists()
+
+
+def test_a_variant_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
+    """Variant A: houses 1, 2 low, 3 high; B: 1 high, 2 and 3 low. Left out, each set gets the variant that carried
+    on the other two: 3 gets A (1 and 2 agree under A), 1 gets B; for 2 both fail on the others (a sigma from a
+    high house matches nothing in a low one) and the first listed, A, is kept."""
+    low, high = scored_set(tiny_frameset, LOW), scored_set(tiny_frameset, HIGH)
+    variants = {"A": {"h1": low, "h2": low, "h3": high}, "B": {"h1": high, "h2": low, "h3": low}}
+    assert carry_risk({"h1": low, "h2": low}) == (0.0, 0.0)
+    assert carry_risk({"h1": low, "h3": high}) == (np.inf, np.inf)  # high -> low: nothing matched
+    rows = chosen_and_carried(variants, BOOT).set_index("set")
+    assert rows.variant.to_dict() == {"h1": "B", "h2": "A", "h3": "A"}
+    assert rows.loc["h3", "cm"] == 50.0 and rows.loc["h1", "cm"] == 50.0  # the choice never saw the set it is read on
+    assert rows.loc["h2", "chosen_by_cm"] == np.inf
+    top = headline(rows.reset_index())
+    assert top["worst_cm"] == 50.0 and top["worst_cm_set"] in ("h1", "h3")
+    with pytest.raises(CarryError, match="at least three"):
+        chosen_and_carried({"A": {"h1": low, "h2": low}, "B": {"h1": low, "h2": low}}, BOOT)
+    with pytest.raises(CarryError, match="same frame-sets"):
+        chosen_and_carried({"A": {"h1": low, "h2": low, "h3": low}, "B": {"h1": low, "h2": low, "h4": low}}, BOOT)
+
+
+def test_carry_command_varies_one_config_key_in_one_pass(tiny_frameset, tmp_path, capsys):
+    import json
+    import shutil
+
+    sets = [str(tiny_frameset.root)]
+    for name in ("b", "c"):
+        shutil.copytree(tiny_frameset.root, tmp_path / name)
+        sets.append(str(tmp_path / name))
+    args = ["carry", *sets, "--matcher", "color", "--cache", str(tmp_path / "scores"), "--bootstrap", "20", "--quiet"]
+    code = main([*args, "--vary", "stride=4,8", "--json", str(tmp_path / "carry.json")])
+    out = capsys.readouterr().out
+    assert code in (0, None) and "(stride=4)" in out and "(stride=8)" in out
+    assert "stride chosen on the other sets" in out
+    report = json.loads((tmp_path / "carry.json").read_text())
+    assert list(report["rows"]) == ["stride=4", "stride=8"] and len(report["chosen"]["rows"]) == 3
+    assert {r["variant"] for r in report["chosen"]["rows"]} <= {"stride=4", "stride=8"}
+    assert len(list((tmp_path / "scores").glob("color@*/*/scores_all.parquet"))) == 2  # a table per variant (the
+    # copies have the set's fingerprint: one table serves all three)
+    assert main([*args, "--vary", "stride=4"]) == 2
+    assert "at least two different values" in capsys.readouterr().err

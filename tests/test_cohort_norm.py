@@ -120,3 +120,48 @@ def test_the_score_table_stores_each_targets_cohort_and_still_hits_its_cache(tin
     merged = merge(sorted(tmp_path.glob("p*/*/*/scores_all_shard*.parquet")), tmp_path / "merged.parquet")
     assert merged.target_notes == table.target_notes
     assert score(tiny_frameset, "color", out=tmp_path / "s", run=quiet).target_notes == {}
+
+
+def test_variants_scored_together_prepare_their_shared_base_once(tiny_frameset, tmp_path, monkeypatch):
+    from pin_match.matchers.color import ColorMatcher
+    from pin_match.scoring import RunOptions, score, score_many
+
+    quiet = RunOptions(progress=False)
+    cohort = _cohort(tmp_path / "cohort", [(200, 30, 30), (30, 30, 200), (30, 200, 30)])
+    configs = [dict(base="color", weights=cohort, k=k, probability=False) for k in (0, 2)]
+    calls = []
+    original = ColorMatcher._match_batch
+    monkeypatch.setattr(ColorMatcher, "_match_batch", lambda self, images: calls.append(len(images))
+                        or original(self, images))
+    together = score_many(tiny_frameset, [create_matcher("cohort-norm", **c) for c in configs], out=tmp_path / "t",
+                          run=quiet)
+    targets = tiny_frameset.episodes.target_object_id.nunique()
+    assert calls.count(3) == targets  # the three cohort images: once a target, not once a variant
+    for cfg, table in zip(configs, together):
+        alone = score(tiny_frameset, "cohort-norm", overrides=cfg, out=tmp_path / f"a{cfg['k']}", run=quiet)
+        assert alone.frames.equals(table.frames) and alone.target_notes == table.target_notes
+
+
+def test_a_cohort_folder_is_written_from_a_framesets_objects(tiny_frameset, tmp_path, capsys):
+    from pin_match.cli import main
+    from pin_match.data.cohort import GREY
+    from pin_match.data.images import read_image
+
+    out = tmp_path / "cohort"
+    assert main(["data", "cohort", str(tiny_frameset.root), str(out), "--views", "2"]) in (0, None)
+    objects = sorted(tiny_frameset.objects.object_id)
+    assert sorted(p.name for p in out.glob("*.png")) == sorted(f"{o}_v{k}.png" for o in objects for k in (0, 1))
+    view = tiny_frameset.target(objects[0]).views[1]
+    image = read_image(out / f"{objects[0]}_v1.png")
+    clear = view[..., 3] == 0
+    assert clear.any() and (image[clear] == GREY).all()  # the cut-out's background is grey, its object kept
+    solid = view[..., 3] == 255
+    assert np.array_equal(image[solid], view[..., :3][solid])
+    notice = (out / "NOTICE.md").read_text()
+    assert all(f"- {o} (" in notice for o in objects) and tiny_frameset.fingerprint in notice
+    matcher = create_matcher("cohort-norm", base="color", weights=str(out))
+    assert len(matcher.cohort_images) == 2 * len(objects)
+    assert main(["data", "cohort", str(tiny_frameset.root), str(out)]) == 2  # never over an existing folder
+    assert "already exists" in capsys.readouterr().err
+    assert main(["data", "cohort", str(tiny_frameset.root), str(tmp_path / "none"), "--views", "0"]) == 2
+    assert "at least one view" in capsys.readouterr().err and not (tmp_path / "none").exists()

@@ -119,3 +119,42 @@ def test_gallery_figure_for_notebooks(tiny):
     scored = scored_frames(frame_labels(fs), table)
     fig = section_figure(fs, table, sections(scored, SIGMA)[0], SIGMA, max_frames=2)
     assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title()
+
+
+def test_a_normalised_tables_report_shows_each_targets_cohort_beside_its_scores(tiny, tmp_path):
+    """Issue 44.3: per target the scale and its closest cohort members, and the members beside a look-alike."""
+    from pin_match import atomic
+    from pin_match.contract.cohort import TargetCohort
+    from pin_match.evaluation.scales import scale_table, target_cohorts
+
+    fs, stub = tiny
+    folder = tmp_path / "cohort"
+    atomic.write_image(folder / "m0.png", np.full((40, 40, 3), 200, np.uint8))  # m1.png is gone from this machine
+    target = fs.episode("ep_val").target_object_id
+    cohort = TargetCohort.of(str(folder), ["m2.png", "m0.png", "m1.png"], [0.1, 0.8, 0.6], k=2, min_std=0.25,
+                             probability=True)
+    meta = dict(stub.meta, score_scale="cohort-normalised: by hand", targets={target: cohort.as_notes()})
+    table = ScoreTable(stub.frames, meta)
+    assert target_cohorts(table) == {target: cohort}
+    scored = EvalContext(fs).scored(table, "val")
+    (row,) = scale_table(target_cohorts(table), scored, fs.episodes.set_index("episode_id").target_object_id,
+                         SIGMA).to_dict("records")
+    # 0.5 sits at the geometric mean of the odds of 0.8 and 0.6: sqrt(4 * 1.5) / (1 + sqrt(6))
+    assert row["raw score at 0.5"] == pytest.approx(np.sqrt(6) / (1 + np.sqrt(6)), abs=1e-4)
+    assert row["closest cohort members (raw score)"] == "m0.png 0.800, m1.png 0.600"
+    raw = float(cohort.impostors.raw(0.6))
+    assert row["look-alike frames: highest (raw)"] == f"0.600 ({raw:.3f})" and cohort.impostors.normalised(raw) \
+        == pytest.approx(0.6)
+    assert row["target frames: median (raw)"].startswith("0.300") and row["look-alikes above sigma"] == "1 of 1"
+
+    report(table, EvalContext(fs, Bootstrap(n_boot=20)), tmp_path / "r", sigma=SIGMA, split="val")
+    text = (tmp_path / "r" / "report.html").read_text(encoding="utf-8")
+    assert "score scale" in text and "cohort-normalised: by hand" in text
+    scales = text[text.index('id="scales"'):text.index('id="false_alarms"')]
+    assert "m0.png 0.800, m1.png 0.600" in scales and scales.count('alt="cohort member m0.png') == 1
+    assert 'alt="cohort member m1.png' not in text  # its image is not here: named, not drawn
+    alarms = text[text.index('id="false_alarms"'):text.index('id="misses"')]
+    lookalike = alarms[alarms.index("frame ep_val_0001"):]
+    assert "closest cohort members: m0.png 0.800" in lookalike[:lookalike.index("</figure>")]
+    other = alarms[alarms.index(f"frame {PLANTED}"):]
+    assert "cohort" not in other[:other.index("</figure>")]  # another category's frame: no cohort strip

@@ -17,6 +17,7 @@ DATA_HELP = """Frame-set sources, one catalogue: list them, prepare one from its
   pin-match data build core50 OUT [--variant pasted]   a source's frame-set (shipped photos: offline)
   pin-match data prepare grocery GROCERY_REPO --out SRC
   pin-match data build grocery OUT --src SRC           a downloaded source: prepare once, then build
+  pin-match data cohort FRAMESET OUT                   its objects' views as a cohort for cohort-norm
 """
 
 
@@ -44,10 +45,17 @@ def _cmd_prepare(a: argparse.Namespace) -> None:
     print(f"wrote {get(a.source).prepare(a.inputs, a.out, overwrite=a.overwrite)}")
 
 
+def _cmd_cohort(a: argparse.Namespace) -> None:
+    from pin_match.data.cohort import write_cohort
+    from pin_match.data.frameset import FrameSet
+
+    print(f"wrote {write_cohort(FrameSet.load(a.frameset), a.out, views=a.views, overwrite=a.overwrite)}")
+
+
 def add_commands(sub: argparse._SubParsersAction) -> None:
     d = sub.add_parser("data", help="list, prepare and build frame-sets from the catalogue of data sources",
                        description=DATA_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
-    group = d.add_subparsers(dest="data_command", required=True, metavar="{list,build,prepare}",
+    group = d.add_subparsers(dest="data_command", required=True, metavar="{list,build,prepare,cohort}",
                              help="what to do with the catalogue")
 
     s = group.add_parser("list", help="the sources: variants, what prepare reads, whether --src is needed")
@@ -72,3 +80,11 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--out", type=Path, required=True, help="source folder to create")
     s.add_argument("--overwrite", action="store_true", help="replace an existing source folder at --out")
     s.set_defaults(func=_cmd_prepare)
+
+    s = group.add_parser("cohort", help="a cohort folder for cohort-norm (--weights): a frame-set's objects' "
+                                        "reference views on grey, with their sources in NOTICE.md")
+    s.add_argument("frameset", type=Path, help="a frame-set whose objects differ from those of the houses scored")
+    s.add_argument("out", type=Path, help="cohort folder to create")
+    s.add_argument("--views", type=int, default=1, help="reference views per object (default 1)")
+    s.add_argument("--overwrite", action="store_true", help="replace an existing folder at OUT")
+    s.set_defaults(func=_cmd_cohort)

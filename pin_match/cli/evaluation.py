@@ -136,15 +136,15 @@ def _cmd_carry(a: argparse.Namespace) -> None:
 
     from pin_match import atomic
     from pin_match.contract.registry import create_matcher
-    from pin_match.evaluation.carry import ScoredSet, leave_one_out
+    from pin_match.evaluation.carry import ScoredSet, chosen_and_carried, headline, leave_one_out
     from pin_match.evaluation.evaluator import EvalContext
     from pin_match.evaluation.intervals import instance_clusters
     from pin_match.evaluation.metrics import Bootstrap
-    from pin_match.scoring import score
+    from pin_match.scoring import score_many
 
     if len(a.framesets) < 2:
         raise UsageError(f"carry needs at least two frame-sets (one is left out at a time), got {a.framesets}")
-    matcher = create_matcher(a.matcher, **matcher_overrides(a))
+    variants = {label: create_matcher(a.matcher, **cfg) for label, cfg in _variants(a).items()}
     contexts = {}  # every frame-set loaded and its split checked before anything is scored
     for item in a.framesets:
         path, _, split = item.partition(":")
@@ -153,20 +153,42 @@ def _cmd_carry(a: argparse.Namespace) -> None:
         reading = split or ("val" if "val" in splits else None)
         ctx.fs.split(reading)  # a split the set lacks is named here
         contexts[item] = (ctx, "train" if "train" in splits else None, reading)
-    sets = {}
-    for item, (ctx, tuning, reading) in contexts.items():
-        table = score(ctx.fs, matcher, out=a.cache, run=run_options(a))
-        sets[item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
-                               clusters=instance_clusters(ctx.fs.episodes))
-    rows = leave_one_out(sets, Bootstrap(n_boot=a.bootstrap))
+    scored: dict[str, dict[str, ScoredSet]] = {label: {} for label in variants}
+    for item, (ctx, tuning, reading) in contexts.items():  # the variants in one pass: a shared part runs once
+        for label, table in zip(variants, score_many(ctx.fs, list(variants.values()), out=a.cache,
+                                                     run=run_options(a))):
+            scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
+                                            clusters=instance_clusters(ctx.fs.episodes))
+    boot = Bootstrap(n_boot=a.bootstrap)
     columns = ["set", "auroc_same", "sigma", "cm", "cm_low", "cm_high", "first_precision", "own_sigma", "own_cm",
                "own_first_precision", "first_gap"]
+    report: dict = dict(matcher=a.matcher, variants={label: m.id for label, m in variants.items()}, rows={})
     with pd.option_context("display.width", 200, "display.max_colwidth", 60):
-        print(f"{matcher.id}: sigma chosen on every other set, read on the set (worst first)\n"
-              + rows[columns].round(3).to_string(index=False))
+        for label, sets in scored.items():
+            rows = leave_one_out(sets, boot)
+            report["rows"][label] = dict(headline(rows), rows=rows.to_dict("records"))
+            print(f"{variants[label].id} ({label}): sigma chosen on every other set, read on the set (worst first)\n"
+                  + rows[columns].round(3).to_string(index=False) + "\n")
+        if len(variants) > 1:
+            rows = chosen_and_carried(scored, boot)
+            report["chosen"] = dict(headline(rows), rows=rows.to_dict("records"))
+            print(f"{a.vary.split('=')[0]} chosen on the other sets alone, then sigma on them, read on the set "
+                  "(worst first)\n" + rows[["variant", *columns]].round(3).to_string(index=False))
     if a.json:
-        atomic.write_json(a.json, dict(matcher_id=matcher.id, rows=rows.to_dict("records")))
+        atomic.write_json(a.json, report)
         print(f"-> {a.json}")
+
+
+def _variants(a: argparse.Namespace) -> dict[str, dict]:
+    """The matcher's configs by label: one (``--cfg``), or one per value of ``--vary KEY=V1,V2,...`` on top of it."""
+    base = matcher_overrides(a)
+    if not a.vary:
+        return {"as configured": base}
+    key, sep, values = a.vary.partition("=")
+    labels = [v.strip() for v in values.split(",") if v.strip()]
+    if not sep or not key.strip() or len(labels) < 2 or len(set(labels)) < len(labels):
+        raise UsageError(f"--vary {a.vary!r}: expected KEY=V1,V2,... with at least two different values")
+    return {f"{key.strip()}={v}": {**base, key.strip(): v} for v in labels}
 
 
 def _table_arguments(s: argparse.ArgumentParser) -> None:
@@ -241,6 +263,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     add_matcher_config(s)
     s.add_argument("--cache", type=Path, default=outputs.SCORES, help=f"score cache (default {outputs.SCORES})")
     s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
+    s.add_argument("--vary", metavar="KEY=V1,V2,...",
+                   help="variants of the matcher, one per value of one config key (scored in one pass): each "
+                        "variant's rows, then per set the variant chosen on the other sets alone (needs three sets)")
     s.add_argument("--json", type=Path, help="write the rows here")
     add_run_options(s, workers=WORKERS_HELP)
     s.set_defaults(func=_cmd_carry)

@@ -60,6 +60,11 @@ class Impostors:
         z = (raw - self.mean) / self.std
         return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
 
+    def raw(self, normalised: float | np.ndarray) -> float | np.ndarray:
+        """The raw score a normalised one came from (``normalised``'s inverse, so a report can show both)."""
+        value = self.mean + self.std * logit(normalised)
+        return 1.0 / (1.0 + np.exp(-value)) if self.probability else value
+
 
 @dataclass(frozen=True)
 class TargetCohort:

@@ -6,6 +6,9 @@ a sigma on a set beside that set's own best (PIN's first-match objective): CM (s
 frames that show a look-alike) and first-match precision, with intervals over target instances.
 ``leave_one_out`` chooses sigma on every set but one, reads it on the one left out, for each set
 in turn; its worst row (highest CM, widest first-match gap) is how far the score carries.
+``chosen_and_carried`` does the same for a choice among variants of a matcher (a config value,
+e.g. the cohort's ``k``): for each set left out, the variant is chosen on the other sets alone
+(leaving one out among them), so neither sigma nor variant has seen the set it is read on.
 """
 
 from __future__ import annotations
@@ -63,17 +66,69 @@ def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
                      ignore_index=True)
 
 
+def sigma_without(sets: Mapping[str, ScoredSet], name: str) -> float:
+    """Sigma chosen (first-match objective) on the tuning frames of every set but ``name``, pooled."""
+    others = [s.tuning for other, s in sets.items() if other != name]
+    if not others or any(f.empty for f in others) or sets[name].reading.empty:
+        raise CarryError(f"a frame-set has no scored frames to tune or read (left out: {name})")
+    return sigma_for(pooled(others))
+
+
 def leave_one_out(sets: Mapping[str, ScoredSet], boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
     """One row per set: sigma chosen on every other set's tuning frames together, read on this set's frames
-    (``carried``); the rows sorted worst first: a set where the carried sigma matches nothing (CM undefined), then
-    the highest CM."""
+    (``carried``); the rows sorted worst first (``worst_first``)."""
     if len(sets) < 2:
         raise CarryError(f"leaving one set out needs at least two frame-sets, got {len(sets)}")
-    rows = []
+    rows = [dict(set=name, **carried(held_out.reading, sigma_without(sets, name), held_out.clusters, boot))
+            for name, held_out in sets.items()]
+    return worst_first(pd.DataFrame(rows))
+
+
+def worst_first(rows: pd.DataFrame) -> pd.DataFrame:
+    """A set where the carried sigma matches nothing (CM undefined) first, then the highest CM."""
+    return rows.sort_values("cm", ascending=False, na_position="first").reset_index(drop=True)
+
+
+def carry_risk(sets: Mapping[str, ScoredSet]) -> tuple[float, float]:
+    """(worst CM, largest first-match gap) of leaving each set out in turn, point values: what a variant is chosen
+    by. A carried sigma that matches nothing on a set counts as the worst there is (infinity)."""
+    worst_cm = worst_gap = -np.inf
     for name, held_out in sets.items():
-        others = [s.tuning for other, s in sets.items() if other != name]
-        if any(f.empty for f in others) or held_out.reading.empty:
-            raise CarryError(f"a frame-set has no scored frames to tune or read (left out: {name})")
-        sigma = sigma_for(pooled(others))
-        rows.append(dict(set=name, **carried(held_out.reading, sigma, held_out.clusters, boot)))
-    return pd.DataFrame(rows).sort_values("cm", ascending=False, na_position="first").reset_index(drop=True)
+        frames = held_out.reading
+        sigma, arrays = sigma_without(sets, name), frame_arrays(frames)
+        at, own = detection_metrics(arrays, sigma), detection_metrics(arrays, sigma_for(frames))
+        cm, first, own_first = at["cm_pct"], at["first_match_precision"], own["first_match_precision"]
+        worst_cm = max(worst_cm, np.inf if cm is None else cm)
+        worst_gap = max(worst_gap, np.inf if first is None or own_first is None else own_first - first)
+    return float(worst_cm), float(worst_gap)
+
+
+def chosen_and_carried(variants: Mapping[str, Mapping[str, ScoredSet]],
+                       boot: Bootstrap = DEFAULT_BOOT) -> pd.DataFrame:
+    """One row per set: the variant chosen on the other sets alone (lowest ``carry_risk`` among them: worst CM, then
+    the largest first-match gap; the first listed on a tie), its sigma chosen on those sets, read on this set
+    (``carried``); worst first. ``variants``: per variant name, the same sets scored by it."""
+    names = [list(sets) for sets in variants.values()]
+    if not names or any(n != names[0] for n in names):
+        raise CarryError("every variant must be scored on the same frame-sets")
+    if len(names[0]) < 3:
+        raise CarryError(f"choosing a variant without the set left out needs at least three frame-sets, "
+                         f"got {len(names[0])}")
+    rows = []
+    for name in names[0]:
+        risks = {v: carry_risk({n: s for n, s in sets.items() if n != name}) for v, sets in variants.items()}
+        chosen = min(risks, key=risks.get)
+        sets = variants[chosen]
+        rows.append(dict(set=name, variant=chosen, chosen_by_cm=risks[chosen][0], chosen_by_gap=risks[chosen][1],
+                         **carried(sets[name].reading, sigma_without(sets, name), sets[name].clusters, boot)))
+    return worst_first(pd.DataFrame(rows))
+
+
+def headline(rows: pd.DataFrame) -> dict:
+    """How far a score carries over these rows: the worst CM and its set, the largest first-match gap and its set,
+    the mean AUROC-same."""
+    ranked = worst_first(rows)
+    gaps = rows.first_gap.fillna(np.inf)
+    return dict(worst_cm=float(ranked.cm.iloc[0]), worst_cm_set=str(ranked.set.iloc[0]),
+                largest_gap=float(rows.first_gap[gaps.idxmax()]), largest_gap_set=str(rows.set[gaps.idxmax()]),
+                mean_auroc_same=float(rows.auroc_same.mean()))

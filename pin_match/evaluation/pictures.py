@@ -7,15 +7,20 @@ crosses) and is written once per page through the page's ``html.Assets``.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 from markupsafe import Markup
 
+from pin_match.contract.cohort import TargetCohort
 from pin_match.contract.matcher import Target
 from pin_match.data.frameset import FrameSet
+from pin_match.data.images import read_image
 from pin_match.evaluation import html
 from pin_match.evaluation.gallery import (
     OUTLINE_RGB,
     POINT_RGB,
+    REFERENCE_SIZE,
     THUMB_SIZE,
     draw_frame,
     frame_points,
@@ -49,6 +54,18 @@ def reference_images(assets: html.Assets, target: Target) -> list[Markup]:
 def references(assets: html.Assets, target: Target) -> Markup:
     """The reference views as one block, to sit beside a frame."""
     return Markup('<div class="refs">{}</div>').format(html.join(reference_images(assets, target)))
+
+
+def cohort_members(assets: html.Assets, cohort: TargetCohort, n: int = 3) -> Markup:
+    """The ``n`` cohort members closest to the target (its scale's impostors), each titled with its raw score;
+    only those whose image is still on this machine (the cohort's folder as scored)."""
+    images = []
+    for name, score in cohort.closest[:n]:
+        path = Path(cohort.folder) / name
+        if path.is_file():
+            src = assets.add(("cohort", str(path)), lambda p=path: thumbnail(read_image(p), REFERENCE_SIZE))
+            images.append(html.image(src, f"cohort member {name}, raw score {score:.3f}"))
+    return Markup('<div class="refs">{}</div>').format(html.join(images))
 
 
 def legend(points: bool = True) -> Markup:

@@ -13,12 +13,14 @@ from pathlib import Path
 import pandas as pd
 from markupsafe import Markup
 
+from pin_match.contract.cohort import TargetCohort
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation import html
 from pin_match.evaluation.evaluator import Evaluation
 from pin_match.evaluation.gallery import DEFAULT_CAP, Section, frame_points, sections
 from pin_match.evaluation.layout import ReportFiles
-from pin_match.evaluation.pictures import frame_image, legend, references
+from pin_match.evaluation.pictures import cohort_members, frame_image, legend, references
+from pin_match.evaluation.scales import LOOKALIKE, scale_table, target_cohorts
 from pin_match.evaluation.tables import report_tables
 from pin_match.scoring.table import ScoreTable
 
@@ -34,6 +36,7 @@ def header(table: ScoreTable, fs: FrameSet, result: dict) -> Markup:
     config = table.meta.get("config", {})
     return html.definitions([
         ("matcher id", table.matcher_id), ("config", json.dumps(config, sort_keys=True)),
+        ("score scale", table.meta.get("score_scale", "not recorded in the table")),
         ("weights", config.get("weights") or "none named in the config"),
         ("frame-set", f"{fs.manifest.get('name', '')} at {fs.root}"), ("frame-set fingerprint", fs.fingerprint),
         ("split", result["split"]), ("sigma", f"{result['sigma']:g} ({result['sigma_source']})"),
@@ -41,8 +44,10 @@ def header(table: ScoreTable, fs: FrameSet, result: dict) -> Markup:
     ])
 
 
-def frame_figure(fs: FrameSet, table: ScoreTable, frame: pd.Series, sigma: float, assets: html.Assets) -> Markup:
-    """A drawn frame beside its episode target's references, captioned with everything needed to find it again."""
+def frame_figure(fs: FrameSet, table: ScoreTable, frame: pd.Series, sigma: float, assets: html.Assets,
+                 cohorts: dict[str, TargetCohort]) -> Markup:
+    """A drawn frame beside its episode target's references, captioned with everything needed to find it again;
+    a look-alike's also beside the target's closest cohort members (what its scale was read against)."""
     points = frame_points(table, frame.frame_id, sigma)
     target_id = fs.episode(frame.episode_id).target_object_id
     matched = frame.score >= sigma
@@ -51,11 +56,17 @@ def frame_figure(fs: FrameSet, table: ScoreTable, frame: pd.Series, sigma: float
              f"frame {frame.frame_id}", f"target {target_id} ({frame.target_category})"]
     good = (frame.role == "target") == matched
     images = [frame_image(assets, fs, frame.frame_id, points), references(assets, fs.target(target_id))]
+    cohort = cohorts.get(target_id)
+    if cohort is not None and frame.role == LOOKALIKE:
+        images.append(cohort_members(assets, cohort))
+        lines.append("then the target's closest cohort members: " +
+                     ", ".join(f"{n} {s:.3f}" for n, s in cohort.closest[:3]) +
+                     f" (raw; this frame {float(cohort.impostors.raw(frame.score)):.3f} raw)")
     return html.figure(images, lines, "hit" if good else "miss")
 
 
 def section_html(fs: FrameSet, table: ScoreTable, section: Section, sigma: float, cap: int,
-                 assets: html.Assets) -> list[Markup]:
+                 assets: html.Assets, cohorts: dict[str, TargetCohort]) -> list[Markup]:
     shown = len(section.frames)
     capped = f"; capped at {cap}" if section.n_total > shown else ""
     parts = [html.heading(section.title, 2, section.key),
@@ -64,8 +75,28 @@ def section_html(fs: FrameSet, table: ScoreTable, section: Section, sigma: float
         hits = int((section.frames.role == "target").sum())
         parts.append(html.paragraph(f"Among the episodes shown, the first frame above sigma shows the target in "
                                     f"{hits} of {shown}."))
-    parts.append(html.gallery([frame_figure(fs, table, f, sigma, assets) for _, f in section.frames.iterrows()]))
+    parts.append(html.gallery([frame_figure(fs, table, f, sigma, assets, cohorts)
+                               for _, f in section.frames.iterrows()]))
     return parts
+
+
+def scale_html(fs: FrameSet, cohorts: dict[str, TargetCohort], evaluation: Evaluation, sigma: float,
+               assets: html.Assets) -> list[Markup]:
+    """Each target's cohort beside its scores (``scales``), then per target its references and closest members."""
+    targets = fs.episodes.set_index("episode_id").target_object_id
+    rows = scale_table(cohorts, evaluation.frames, targets, sigma)
+    if rows.empty:
+        return []
+    figures = [html.figure([references(assets, fs.target(t)), cohort_members(assets, cohorts[t])],
+                           [f"target {t}, then its closest cohort members", *(f"{n}: raw {s:.3f}"
+                                                                              for n, s in cohorts[t].closest[:3])])
+               for t in rows.target]
+    return [html.heading("Each target's score scale", 2, "scales"),
+            html.paragraph("The score is read against the matcher's scores of a cohort of other objects: 0.5 is the "
+                           "raw score of the target's closest cohort members. It carries from house to house as far as "
+                           "a house's look-alikes score like those members; a look-alike far above them was not "
+                           "foreseen by the cohort. Scores in brackets are raw.", "note"),
+            html.table(rows), html.gallery(figures)]
 
 
 def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evaluation: Evaluation,
@@ -81,6 +112,8 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
              html.table(overall, f"split {result['split']}, sigma {sigma:g} ({result['sigma_source']})"),
              html.heading("Per target category"), html.table(per_category), html.heading("Plots"),
              html.gallery([html.image(plot.name, alt, 440) for plot, alt in plots if plot.exists()]), page_legend()]
+    cohorts = target_cohorts(table)
+    parts += scale_html(fs, cohorts, evaluation, sigma, assets)
     for section in sections(evaluation.frames, sigma, cap):
-        parts += section_html(fs, table, section, sigma, cap, assets)
+        parts += section_html(fs, table, section, sigma, cap, assets, cohorts)
     return html.write_page(files.page, f"{table.matcher_id} on {result['split']} at sigma {sigma:g}", parts)

@@ -53,10 +53,16 @@ class PreparedMatchers:
         self.pool = ThreadPoolExecutor(max_workers=max(2, workers))
 
     def hold(self, fs: FrameSet, target_id: str, which: Sequence[int]) -> None:
-        for i in which:
-            if self.targets[i] != target_id:
+        """Prepare the matchers ``which`` for the target; in one shared pass, so what several compute alike while
+        preparing (variants of ``cohort-norm`` scoring one cohort with one base) is computed once."""
+        todo = [i for i in which if self.targets[i] != target_id]
+        if not todo:
+            return
+        target = fs.target(target_id)
+        with shared_pass():
+            for i in todo:
                 self.targets[i] = None  # a failed prepare leaves nothing held
-                self.matchers[i].prepare(fs.target(target_id))
+                self.matchers[i].prepare(target)
                 self.targets[i] = target_id
 
     def forget(self) -> None:
