@@ -40,6 +40,9 @@ def test_a_sigma_chosen_where_look_alikes_score_low_matches_them_where_they_scor
     assert on_high.tm == 50.0  # TM and CM: shares of the matched frames
     on_low = rows.loc["low"]  # sigma chosen on the high house: above the low house's target, nothing matched
     assert on_low.sigma > 0.8 and on_low.match == 0.0 and on_low.own_cm == 0.0
+    # no CM there, but no episode finds its target either: the success gap says so
+    assert (on_low.first_success, on_low.own_first_success, on_low.success_gap) == (0.0, 100.0, 100.0)
+    assert on_low.own_match == 100.0
     assert list(rows.index) == ["high", "low"] or np.isnan(on_low.cm)  # worst (highest CM) first
 
 
@@ -47,7 +50,7 @@ def test_read_at_its_own_best_sigma_a_set_loses_nothing(tiny_frameset):
     frames = scored_set(tiny_frameset, HIGH)
     row = carried(frames.reading, 0.9, frames.clusters, BOOT)
     assert row["own_sigma"] == pytest.approx(row["sigma"], abs=0.05) and row["first_gap"] == 0.0
-    assert row["cm"] == row["own_cm"] == 0.0 and row["auroc_same"] == 1.0
+    assert row["cm"] == row["own_cm"] == 0.0 and row["auroc_same"] == 1.0 and row["success_gap"] == 0.0
 
 
 def test_pooled_sets_keep_their_frames_apart(tiny_frameset):
@@ -88,6 +91,8 @@ def test_a_variant_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
     assert rows.loc["h2", "chosen_by_cm"] == np.inf
     top = headline(rows.reset_index())
     assert top["worst_cm"] == 50.0 and top["worst_cm_set"] in ("h1", "h3")
+    # every house shows its target first, so wherever a carried sigma matches, the first match is the target
+    assert top["largest_success_gap"] == 0.0 and top["lowest_match"] == 100.0
     with pytest.raises(CarryError, match="at least three"):
         chosen_and_carried({"A": {"h1": low, "h2": low}, "B": {"h1": low, "h2": low}}, BOOT)
     with pytest.raises(CarryError, match="same frame-sets"):

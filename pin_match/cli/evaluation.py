@@ -160,8 +160,9 @@ def _cmd_carry(a: argparse.Namespace) -> None:
             scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
                                             clusters=instance_clusters(ctx.fs.episodes))
     boot = Bootstrap(n_boot=a.bootstrap)
-    columns = ["set", "auroc_same", "sigma", "cm", "cm_low", "cm_high", "first_precision", "own_sigma", "own_cm",
-               "own_first_precision", "first_gap"]
+    columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
+               "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",
+               "success_gap"]
     report: dict = dict(matcher=a.matcher, variants={label: m.id for label, m in variants.items()}, rows={})
     with pd.option_context("display.width", 200, "display.max_colwidth", 60):
         for label, sets in scored.items():

@@ -3,8 +3,9 @@
 ``verify`` locates with an ``effnet`` map; scoring ``verify`` and ``effnet`` together would run
 that network twice on every frame. Inside ``shared_pass()`` (the scoring engine opens one per
 batch of frames, and one while it prepares a run's matchers for a target: variants of
-``cohort-norm`` score one cohort with one base), ``Matcher.match_batch`` first looks for results of the same matcher id, for
-the same target, on the very same image buffers, and computes only on a miss. The id hashes the
+``cohort-norm`` score one cohort with one base), ``Matcher.match_batch`` first looks for results
+of the same matcher id, for the same target, on the very same image buffers, and computes only
+on a miss. The id hashes the
 config and the weights' identity, so two instances with one id compute the same numbers: a hit
 returns exactly what the call would have computed, and a table scored in a group equals the
 table scored alone.

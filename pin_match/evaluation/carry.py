@@ -41,8 +41,10 @@ class ScoredSet:
 
 def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """``frames`` read at ``sigma`` beside their own best sigma: AUROC-same, CM and first-match precision with
-    intervals (target instances resampled), and the first-match gap (own best minus carried, in points); a metric
-    undefined at a sigma (nothing matched) is NaN."""
+    intervals (target instances resampled), %Match and first-match success (% of all episodes whose first match is
+    the target, what sigma is chosen by) at both, so a sigma that keeps CM low by matching in few episodes shows;
+    the first-match gaps (own best minus carried, in points, of precision and of success); a metric undefined at a
+    sigma (nothing matched) is NaN."""
     arrays = frame_arrays(frames)
     own = sigma_for(frames)
     at, at_own = detection_metrics(arrays, sigma), detection_metrics(arrays, own)
@@ -54,9 +56,12 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
                sigma=sigma, tm=at["tm_pct"], cm=at["cm_pct"], cm_low=low_high["cm_pct"][0],
                cm_high=low_high["cm_pct"][1], match=at["match_pct"], first_precision=at["first_match_precision"],
                first_low=low_high["first_match_precision"][0], first_high=low_high["first_match_precision"][1],
-               own_sigma=own, own_cm=at_own["cm_pct"], own_first_precision=at_own["first_match_precision"])
+               first_success=at["first_match_success"], own_sigma=own, own_cm=at_own["cm_pct"],
+               own_match=at_own["match_pct"], own_first_precision=at_own["first_match_precision"],
+               own_first_success=at_own["first_match_success"])
     row = {key: np.nan if value is None else float(value) for key, value in row.items()}  # None: undefined there
-    return dict(row, first_gap=row["own_first_precision"] - row["first_precision"])
+    return dict(row, first_gap=row["own_first_precision"] - row["first_precision"],
+                success_gap=row["own_first_success"] - row["first_success"])
 
 
 def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
@@ -125,10 +130,12 @@ def chosen_and_carried(variants: Mapping[str, Mapping[str, ScoredSet]],
 
 
 def headline(rows: pd.DataFrame) -> dict:
-    """How far a score carries over these rows: the worst CM and its set, the largest first-match gap and its set,
-    the mean AUROC-same."""
+    """How far a score carries over these rows: the worst CM and its set, the largest first-match precision gap and
+    success gap with their sets, the lowest %Match, the mean AUROC-same."""
     ranked = worst_first(rows)
-    gaps = rows.first_gap.fillna(np.inf)
+    gaps, success = rows.first_gap.fillna(np.inf), rows.success_gap.fillna(np.inf)
     return dict(worst_cm=float(ranked.cm.iloc[0]), worst_cm_set=str(ranked.set.iloc[0]),
                 largest_gap=float(rows.first_gap[gaps.idxmax()]), largest_gap_set=str(rows.set[gaps.idxmax()]),
+                largest_success_gap=float(rows.success_gap[success.idxmax()]),
+                largest_success_gap_set=str(rows.set[success.idxmax()]), lowest_match=float(rows.match.min()),
                 mean_auroc_same=float(rows.auroc_same.mean()))
