@@ -137,8 +137,9 @@ def test_a_normalised_tables_report_shows_each_targets_cohort_beside_its_scores(
     table = ScoreTable(stub.frames, meta)
     assert target_cohorts(table) == {target: cohort}
     scored = EvalContext(fs).scored(table, "val")
-    (row,) = scale_table(target_cohorts(table), scored, fs.episodes.set_index("episode_id").target_object_id,
-                         SIGMA).to_dict("records")
+    rows = scale_table(target_cohorts(table), scored, fs.episodes.set_index("episode_id").target_object_id, SIGMA)
+    assert list(rows.index) == [target]  # the train episode's target is not in the val split
+    (row,) = rows.to_dict("records")
     # 0.5 sits at the geometric mean of the odds of 0.8 and 0.6: sqrt(4 * 1.5) / (1 + sqrt(6))
     assert row["raw score at 0.5"] == pytest.approx(np.sqrt(6) / (1 + np.sqrt(6)), abs=1e-4)
     assert row["closest cohort members (raw score)"] == "m0.png 0.800, m1.png 0.600"

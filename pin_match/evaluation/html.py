@@ -35,7 +35,7 @@ dt { font-weight: bold; } dd { margin: 0; font-family: monospace; word-break: br
 .gallery { display: flex; flex-wrap: wrap; gap: 1em; align-items: flex-start; }
 figure { margin: 0; border: 1px solid #ccc; padding: 0.4em; background: #f7f7f7; }
 figure.hit { border-color: #0a0; } figure.miss { border-color: #c00; }
-figcaption { font-size: 0.8em; max-width: 330px; }
+figcaption { font-size: 0.8em; max-width: 330px; overflow-wrap: anywhere; }
 .refs img { margin-right: 2px; }
 .note { color: #444; font-size: 0.9em; }
 .swatch { display: inline-block; width: 0.9em; height: 0.9em; vertical-align: middle; border: 1px solid #333; }

@@ -90,12 +90,13 @@ def scale_html(fs: FrameSet, cohorts: dict[str, TargetCohort], evaluation: Evalu
     figures = [html.figure([references(assets, fs.target(t)), cohort_members(assets, cohorts[t])],
                            [f"target {t}, then its closest cohort members", *(f"{n}: raw {s:.3f}"
                                                                               for n, s in cohorts[t].closest[:3])])
-               for t in rows.target]
+               for t in rows.index]
     return [html.heading("Each target's score scale", 2, "scales"),
             html.paragraph("The score is read against the matcher's scores of a cohort of other objects: 0.5 is the "
                            "raw score of the target's closest cohort members. It carries from house to house as far as "
                            "a house's look-alikes score like those members; a look-alike far above them was not "
-                           "foreseen by the cohort. Scores in brackets are raw.", "note"),
+                           "foreseen by the cohort. Scores in brackets are raw; a spread at the matcher's min_std "
+                           "(default 0.25) is its floor: the closest members agreed more closely than that.", "note"),
             html.table(rows), html.gallery(figures)]
 
 

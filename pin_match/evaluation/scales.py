@@ -18,6 +18,8 @@ from pin_match.evaluation.gallery import frame_roles
 from pin_match.scoring.table import ScoreTable, ScoreTableError
 
 LOOKALIKE = "same-category look-alike"  # gallery.ROLE_NAMES' name of a same-category frame
+COLUMNS = ["target", "category", "raw score at 0.5", "spread (logit)", "closest cohort members (raw score)",
+           "target frames: median (raw)", "look-alike frames: highest (raw)", "look-alikes above sigma"]
 
 
 def target_cohorts(table: ScoreTable) -> dict[str, TargetCohort]:
@@ -57,7 +59,7 @@ def scale_table(cohorts: dict[str, TargetCohort], scored: pd.DataFrame, targets:
             "look-alike frames: highest (raw)": _both(imp, alike.max()) if alike.size else "none",
             "look-alikes above sigma": f"{int((alike >= sigma).sum())} of {alike.size}",
         })
-    return pd.DataFrame(rows)
+    return pd.DataFrame(rows, columns=COLUMNS).set_index("target")
 
 
 def _both(imp, score: float) -> str:
