@@ -165,3 +165,17 @@ def test_a_cohort_folder_is_written_from_a_framesets_objects(tiny_frameset, tmp_
     assert "already exists" in capsys.readouterr().err
     assert main(["data", "cohort", str(tiny_frameset.root), str(tmp_path / "none"), "--views", "0"]) == 2
     assert "at least one view" in capsys.readouterr().err and not (tmp_path / "none").exists()
+
+
+def test_notes_that_are_no_json_are_named_by_the_contract_and_the_engine(tiny_frameset, tmp_path, monkeypatch):
+    from pin_match.contract import ContractError, check_matcher
+    from pin_match.contract.matcher import MatcherError
+    from pin_match.matchers.color import ColorMatcher
+    from pin_match.scoring import RunOptions, score
+
+    monkeypatch.setattr(ColorMatcher, "target_notes", lambda self: {"mean": float("nan")})
+    with pytest.raises(ContractError, match="target_notes\\(\\) must hold JSON values"):
+        check_matcher("color")
+    with pytest.raises(MatcherError, match="matcher color: target_notes\\(\\) must hold JSON values"):
+        score(tiny_frameset, "color", out=tmp_path, run=RunOptions(progress=False))
+    assert not list(tmp_path.glob("*/*/chunks/*.parquet"))  # nothing written for the episode

@@ -302,6 +302,18 @@ class Matcher(ABC):
             r.boxes = np.asarray(r.boxes, np.float32).reshape(-1, 4)
 
 
+def notes_problem(matcher: Matcher) -> str | None:
+    """Why the prepared matcher's ``target_notes`` cannot be stored with a score table (JSON text), or None."""
+    notes = matcher.target_notes()
+    if not isinstance(notes, dict):
+        return f"target_notes() returned {type(notes).__name__}, expected a dict"
+    try:
+        json.dumps(notes, allow_nan=False)
+    except (TypeError, ValueError) as exc:
+        return f"target_notes() must hold JSON values (text, finite numbers, lists, dicts): {exc}"
+    return None
+
+
 def _points_problem(r: MatchResult, height: int, width: int) -> str | None:
     if not np.isfinite(r.points).all():
         return "returned non-finite points"

@@ -17,7 +17,15 @@ from typing import Any
 
 import numpy as np
 
-from pin_match.contract.matcher import Matcher, MatcherError, MatchResult, Modality, Target, class_problems
+from pin_match.contract.matcher import (
+    Matcher,
+    MatcherError,
+    MatchResult,
+    Modality,
+    Target,
+    class_problems,
+    notes_problem,
+)
 from pin_match.contract.registry import build_config, get_matcher_class
 from pin_match.errors import PinMatchError
 
@@ -85,6 +93,9 @@ def check_matcher(name_or_class: str | type[Matcher], *, tol: float = 1e-4, **cf
     if matcher.modality is not Modality.CATEGORY and seen is not None and seen.category:
         broken.append(f"a {matcher.modality.value} matcher was shown the category label")
     scores = _batch_problems(matcher, contract_frames(target), tol, broken)
+    problem = notes_problem(matcher)
+    if problem:
+        broken.append(problem)
     try:
         embedding = np.asarray(matcher.embed_reference(target.views[0]))
         if embedding.ndim != 1 or not np.isfinite(embedding).all():

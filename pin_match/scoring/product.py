@@ -19,7 +19,7 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from pin_match.contract.matcher import Matcher
+from pin_match.contract.matcher import Matcher, MatcherError, notes_problem
 from pin_match.data.frameset import FrameSet
 from pin_match.scoring.cache import Shard, table_meta
 from pin_match.scoring.schema import arrow_schema, episode_rows
@@ -52,6 +52,9 @@ class Product:
 
     def notes(self, matcher: Matcher) -> dict:
         """What the matcher, prepared for an episode's target, says of it (stored per target with the table)."""
+        problem = notes_problem(matcher)
+        if problem:
+            raise MatcherError(f"matcher {matcher.display_name}: {problem}")
         return matcher.target_notes()
 
     def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
