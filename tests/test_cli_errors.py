@@ -25,6 +25,8 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["data", "prepare", "core50", missing, "--out", f"{tmp}/src"],  # two inputs needed
         ["data", "prepare", "synthetic", missing, "--out", f"{tmp}/src"],
         ["data", "prepare", "gso", missing, "--out", f"{tmp}/src"],  # not a checkout of the scans' repository
+        ["data", "cohort", missing, f"{tmp}/cohort"],  # no frame-set there
+        ["data", "cohort", fs, fs],  # an existing folder, without --overwrite
         ["score", missing, "--matcher", "color"],
         ["score", fs, "--matcher", "no-such-matcher"],
         ["score", fs, "--matcher", "color", "--shard", "3/3"],
@@ -63,6 +65,8 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["carry", fs, "--matcher", "color"],  # one frame-set: nothing to leave out
         ["carry", fs, missing, "--matcher", "color", "--cache", f"{tmp}/scores"],
         ["carry", fs, f"{fs}:no-such-split", "--matcher", "color", "--cache", f"{tmp}/scores"],
+        ["carry", fs, fs, "--matcher", "color", "--vary", "stride"],  # no values
+        ["carry", fs, fs, "--matcher", "color", "--vary", "no_such_key=1,2"],
     ]
 
 
