@@ -110,7 +110,8 @@ class CohortNormMatcher(CompositeMatcher):
 
     def _prepare(self, target: Target) -> None:
         super()._prepare(target)
-        names, images = list(self.cohort_images), list(self.cohort_images.values())
+        cohort = self.cohort_images  # the folder listed once
+        names, images = list(cohort), list(cohort.values())
         scores = [r.score for i in range(0, len(images), COHORT_BATCH)
                   for r in self.base.match_batch(images[i:i + COHORT_BATCH])]
         cfg = self.cfg

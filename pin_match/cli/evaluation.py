@@ -138,7 +138,6 @@ def _cmd_carry(a: argparse.Namespace) -> None:
     from pin_match.contract.registry import create_matcher
     from pin_match.evaluation.carry import ScoredSet, chosen_and_carried, headline, leave_one_out
     from pin_match.evaluation.evaluator import EvalContext
-    from pin_match.evaluation.intervals import instance_clusters
     from pin_match.evaluation.metrics import Bootstrap
     from pin_match.scoring import score_many
 
@@ -158,7 +157,7 @@ def _cmd_carry(a: argparse.Namespace) -> None:
         for label, table in zip(variants, score_many(ctx.fs, list(variants.values()), out=a.cache,
                                                      run=run_options(a))):
             scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
-                                            clusters=instance_clusters(ctx.fs.episodes))
+                                            clusters=ctx.clusters)
     boot = Bootstrap(n_boot=a.bootstrap)
     columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
                "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",

@@ -34,6 +34,11 @@ def logit(p: float | np.ndarray) -> float | np.ndarray:
     return np.log(q / (1.0 - q))
 
 
+def sigmoid(x: float | np.ndarray) -> float | np.ndarray:
+    """1 / (1 + exp(-x)), the logit's inverse; x clipped to +-60 so no overflow warns."""
+    return 1.0 / (1.0 + np.exp(-np.clip(x, -60.0, 60.0)))
+
+
 @dataclass(frozen=True)
 class Impostors:
     """The statistics of one target's cohort scores (in the logit domain when ``probability``)."""
@@ -57,13 +62,12 @@ class Impostors:
     def normalised(self, score: float | np.ndarray) -> float | np.ndarray:
         """The score as a z value against the cohort, squashed to [0, 1]: 0.5 is the cohort's (top-k) mean."""
         raw = logit(score) if self.probability else np.asarray(score, np.float64)
-        z = (raw - self.mean) / self.std
-        return 1.0 / (1.0 + np.exp(-np.clip(z, -60.0, 60.0)))
+        return sigmoid((raw - self.mean) / self.std)
 
     def raw(self, normalised: float | np.ndarray) -> float | np.ndarray:
         """The raw score a normalised one came from (``normalised``'s inverse, so a report can show both)."""
         value = self.mean + self.std * logit(normalised)
-        return 1.0 / (1.0 + np.exp(-value)) if self.probability else value
+        return sigmoid(value) if self.probability else value
 
 
 @dataclass(frozen=True)
@@ -92,8 +96,7 @@ class TargetCohort:
     @property
     def midpoint(self) -> float:
         """The raw score that maps to 0.5: the cohort's (top-k) mean, back in the score's own units."""
-        mean = self.impostors.mean
-        return float(1.0 / (1.0 + np.exp(-mean))) if self.impostors.probability else mean
+        return float(self.impostors.raw(0.5))
 
     def as_notes(self) -> dict:
         """JSON values, as ``Matcher.target_notes`` hands them to the score table."""

@@ -302,9 +302,8 @@ class Matcher(ABC):
             r.boxes = np.asarray(r.boxes, np.float32).reshape(-1, 4)
 
 
-def notes_problem(matcher: Matcher) -> str | None:
-    """Why the prepared matcher's ``target_notes`` cannot be stored with a score table (JSON text), or None."""
-    notes = matcher.target_notes()
+def notes_problem(notes: object) -> str | None:
+    """Why a matcher's ``target_notes()`` cannot be stored with a score table (JSON text), or None."""
     if not isinstance(notes, dict):
         return f"target_notes() returned {type(notes).__name__}, expected a dict"
     try:

@@ -93,7 +93,7 @@ def check_matcher(name_or_class: str | type[Matcher], *, tol: float = 1e-4, **cf
     if matcher.modality is not Modality.CATEGORY and seen is not None and seen.category:
         broken.append(f"a {matcher.modality.value} matcher was shown the category label")
     scores = _batch_problems(matcher, contract_frames(target), tol, broken)
-    problem = notes_problem(matcher)
+    problem = notes_problem(matcher.target_notes())
     if problem:
         broken.append(problem)
     try:

@@ -21,7 +21,14 @@ import pandas as pd
 
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.intervals import bootstrap_ci
-from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.metrics import (
+    DEFAULT_BOOT,
+    Bootstrap,
+    FrameArrays,
+    detection_metrics,
+    frame_arrays,
+    ranking_metrics,
+)
 from pin_match.evaluation.tuning import sigma_for
 
 
@@ -46,8 +53,7 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
     the first-match gaps (own best minus carried, in points, of precision and of success); a metric undefined at a
     sigma (nothing matched) is NaN."""
     arrays = frame_arrays(frames)
-    own = sigma_for(frames)
-    at, at_own = detection_metrics(arrays, sigma), detection_metrics(arrays, own)
+    own, at, at_own = readings(arrays, frames, sigma)
     ci = bootstrap_ci(arrays, sigma, clusters=clusters, boot=boot)
     low_high = {key: ci[key] or [np.nan, np.nan] for key in ("auroc_same", "cm_pct", "first_match_precision")}
     ranking = ranking_metrics(arrays)
@@ -62,6 +68,12 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
     row = {key: np.nan if value is None else float(value) for key, value in row.items()}  # None: undefined there
     return dict(row, first_gap=row["own_first_precision"] - row["first_precision"],
                 success_gap=row["own_first_success"] - row["first_success"])
+
+
+def readings(arrays: FrameArrays, frames: pd.DataFrame, sigma: float) -> tuple[float, dict, dict]:
+    """The set's own best sigma, then every metric at ``sigma`` and at its own best: what a carried row is read from."""
+    own = sigma_for(frames)
+    return own, detection_metrics(arrays, sigma), detection_metrics(arrays, own)
 
 
 def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
@@ -100,8 +112,7 @@ def carry_risk(sets: Mapping[str, ScoredSet]) -> tuple[float, float]:
     worst_cm = worst_gap = -np.inf
     for name, held_out in sets.items():
         frames = held_out.reading
-        sigma, arrays = sigma_without(sets, name), frame_arrays(frames)
-        at, own = detection_metrics(arrays, sigma), detection_metrics(arrays, sigma_for(frames))
+        _, at, own = readings(frame_arrays(frames), frames, sigma_without(sets, name))
         cm, first, own_first = at["cm_pct"], at["first_match_precision"], own["first_match_precision"]
         worst_cm = max(worst_cm, np.inf if cm is None else cm)
         worst_gap = max(worst_gap, np.inf if first is None or own_first is None else own_first - first)

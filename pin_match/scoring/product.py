@@ -52,10 +52,11 @@ class Product:
 
     def notes(self, matcher: Matcher) -> dict:
         """What the matcher, prepared for an episode's target, says of it (stored per target with the table)."""
-        problem = notes_problem(matcher)
+        notes = matcher.target_notes()
+        problem = notes_problem(notes)
         if problem:
             raise MatcherError(f"matcher {matcher.display_name}: {problem}")
-        return matcher.target_notes()
+        return notes
 
     def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
         return table_meta(matcher, fs, split, shard)
