@@ -23,7 +23,7 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["data", "build", "no-such-source", f"{tmp}/n"],
         ["data", "prepare", "core50", missing, missing, "--out", f"{tmp}/src"],
         ["data", "prepare", "core50", missing, "--out", f"{tmp}/src"],  # two inputs needed
-        ["data", "prepare", "synthetic", missing, "--out", f"{tmp}/src"],
+        ["data", "prepare", "recolour", missing, "--out", f"{tmp}/src"],
         ["data", "prepare", "gso", missing, "--out", f"{tmp}/src"],  # not a checkout of the scans' repository
         ["data", "cohort", missing, f"{tmp}/cohort"],  # no frame-set there
         ["data", "cohort", fs, fs],  # an existing folder, without --overwrite

@@ -20,7 +20,7 @@ from pin_match.data.sources import DataSource, DataSourceError, catalogue, get, 
 
 SOURCES_DIR = Path(sources.__file__).parent
 # the sources this file knows of; one added later is reported (a skip naming it), never a failure
-KNOWN = ["core50", "grocery", "gso", "myvlm", "recolour", "synthetic", "twins"]
+KNOWN = ["core50", "grocery", "gso", "myvlm", "recolour", "twins"]
 
 
 def _registering_modules() -> set[str]:
@@ -169,14 +169,12 @@ def test_requests_a_source_cannot_serve_fail_before_anything_is_written(tmp_path
         get("core50").build(tmp_path / "a", "drawn")
     with pytest.raises(DataSourceError, match="pin-match data prepare myvlm MYVLM_REPO --out SRC"):
         get("myvlm").build(tmp_path / "a")
-    with pytest.raises(DataSourceError, match="pin-match data prepare gso CHECKOUT --out SRC"):
-        get("gso").build(tmp_path / "a")
     with pytest.raises(DataSourceError, match="reads no source folder"):
         get("recolour").build(tmp_path / "a", src=tmp_path)
     with pytest.raises(DataSourceError, match=r"reads 2 input\(s\) \(CORE50_REPO ROOMS_REPO\), got 1"):
         get("core50").prepare([tmp_path], tmp_path / "src")
     with pytest.raises(DataSourceError, match="needs no preparing"):
-        get("synthetic").prepare([], tmp_path / "src")
+        get("recolour").prepare([], tmp_path / "src")
     assert sorted(p.name for p in tmp_path.iterdir()) == []
 
 

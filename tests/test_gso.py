@@ -12,10 +12,13 @@ import cv2
 import numpy as np
 import pytest
 
+from pin_match.cli.main import main
 from pin_match.data.sources import DataSourceError, get
 from pin_match.data.sources import gso as gso_module
 from pin_match.data.sources.gso import GSO_COMMIT, open_scan_tree, prepare_gso
 from pin_match.data.sources.photo_folder import LookalikeError
+from pin_match.data.sources.prepare import CommitError, checkout_commit
+from pin_match.data.synth import SynthSize
 from pin_match.data.synth.scans import PACKAGED_SCANS, load_scan
 
 # a triangle and a quad off-centre (x 1..3, y 2..4, z 1..2): stored standing on z = 0, centred on x = y = 0
@@ -63,7 +66,10 @@ def leftovers(parent: Path) -> list[str]:
     return sorted(p.name for p in parent.iterdir() if p.name.startswith("."))
 
 
-def test_prepare_writes_a_scan_folder_from_a_work_tree(tmp_path):
+UNCHECKED = f"(a copy without .git, taken to be commit {GSO_COMMIT[:7]}, unchecked)"
+
+
+def test_prepare_writes_a_scan_folder_from_a_copy_without_git_and_says_its_commit_is_unchecked(tmp_path):
     tree = work_tree(tmp_path / "object_sim")
     out = prepare_gso(tree, tmp_path / "src")
     assert out == tmp_path / "src"
@@ -71,7 +77,7 @@ def test_prepare_writes_a_scan_folder_from_a_work_tree(tmp_path):
     assert [r["scan"] for r in table] == ["A", "B"]
     for r in table:
         name = r["scan"]
-        assert r["source"] == f"github:vikashplus/object_sim@{GSO_COMMIT[:7]}:google_objects/{name}"
+        assert r["source"] == f"github:vikashplus/object_sim:google_objects/{name} {UNCHECKED}"
         assert (r["mesh"], r["texture"]) == (f"scans/{name}.npz", f"scans/{name}.png")
         assert r["licence"].startswith("CC BY 4.0")
         scan = load_scan(out, name, r["mesh"], r["texture"])
@@ -81,9 +87,10 @@ def test_prepare_writes_a_scan_folder_from_a_work_tree(tmp_path):
         assert np.array_equal(scan.texture, texture(table.index(r)))
     assert (out / "families.csv").read_bytes() == (PACKAGED_SCANS / "families.csv").read_bytes()
     notice = (out / "NOTICE.md").read_text(encoding="utf-8")
-    assert "CC BY 4.0" in notice and GSO_COMMIT in notice and "2 scans" in notice
+    assert "CC BY 4.0" in notice and "2 scans" in notice
+    assert f"from a copy without .git, taken to be commit {GSO_COMMIT} (unchecked" in notice
     for name in ("A", "B"):
-        assert f"- `{name}`: github:vikashplus/object_sim@{GSO_COMMIT[:7]}:google_objects/{name}, CC BY 4.0" in notice
+        assert f"- `{name}`: github:vikashplus/object_sim:google_objects/{name} {UNCHECKED}, CC BY 4.0" in notice
     assert leftovers(tmp_path) == []
     with pytest.raises(LookalikeError, match="already exists: pass overwrite=True"):
         prepare_gso(tree, out)
@@ -156,8 +163,23 @@ def test_a_plain_copy_inside_another_repository_is_read_as_files(tmp_path):
     _git("init", "-q", cwd=outer)
     _git("commit", "-q", "--allow-empty", "-m", "x", cwd=outer)
     tree = work_tree(outer / "object_sim")
-    assert open_scan_tree(tree).git_dir is None
-    assert [r["scan"] for r in rows(prepare_gso(tree, tmp_path / "src") / "scans.csv")] == ["A", "B"]
+    assert open_scan_tree(tree).git_dir is None and not open_scan_tree(tree).checked
+    assert [(r["scan"], r["source"].endswith(UNCHECKED)) for r in rows(prepare_gso(tree, tmp_path / "src") /
+                                                                         "scans.csv")] == [("A", True), ("B", True)]
+
+
+@needs_git
+def test_a_git_directory_git_cannot_read_is_named_not_recorded_as_no_commit(tmp_path, monkeypatch):
+    tree = work_tree(tmp_path / "object_sim")
+    (tree / ".git").mkdir()  # a damaged checkout: git finds no repository there
+    with pytest.raises(CommitError, match=rf"^{re.escape(str(tree))}: git cannot read the commit of "
+                                          rf"{re.escape(str(tree / '.git'))}: "):
+        prepare_gso(tree, tmp_path / "src")
+    monkeypatch.setenv("PATH", str(tmp_path / "no_programs_here"))
+    with pytest.raises(CommitError, match=r"cannot run git to read the commit of .*; install git, or prepare from a "
+                                          r"copy without \.git \(recorded as commit unknown\)$"):
+        checkout_commit(tree)
+    assert not (tmp_path / "src").exists()
 
 
 @needs_git
@@ -171,7 +193,8 @@ def test_a_mirror_holding_the_commit_reads_the_same_scans(tmp_path, monkeypatch)
     from_mirror = prepare_gso(tmp_path / "mirror.git", tmp_path / "from_mirror")
     from_tree = prepare_gso(tree, tmp_path / "from_tree")  # the work tree is at the (patched) commit: accepted
     assert (from_mirror / "scans.csv").read_text() == (from_tree / "scans.csv").read_text()
-    assert f"@{head[:7]}:google_objects/A" in (from_mirror / "scans.csv").read_text()
+    assert f"@{head[:7]}:google_objects/A," in (from_mirror / "scans.csv").read_text()
+    assert f"read from github:vikashplus/object_sim at commit {head} (folder" in (from_mirror / "NOTICE.md").read_text()
     assert (from_mirror / "NOTICE.md").read_text() == (from_tree / "NOTICE.md").read_text()
     for r in rows(from_mirror / "scans.csv"):
         a, b = load_scan(from_mirror, r["scan"], r["mesh"], r["texture"]), load_scan(from_tree, r["scan"], r["mesh"],
@@ -182,11 +205,24 @@ def test_a_mirror_holding_the_commit_reads_the_same_scans(tmp_path, monkeypatch)
         open_scan_tree(tmp_path / "empty.git")
 
 
-def test_build_needs_a_prepared_folder(tmp_path):
+def test_build_renders_the_shipped_scans_or_a_prepared_folder_as_synth_does(tmp_path, monkeypatch):
+    """gso is the catalogue's one door to the generator: without --src, the default set of `pin-match synth`."""
+    import pin_match.data.synth as synth
+
+    calls = []
+
+    def generate(out, size, *, scans=None, overwrite=False, **options):
+        calls.append((out.name, size, scans, overwrite))
+        return f"built {out.name}"
+
+    monkeypatch.setattr(synth, "generate", generate)
     source = get("gso")
     assert source.prepare_inputs == ("CHECKOUT",) and source.licence.startswith("CC BY 4.0")
-    with pytest.raises(DataSourceError, match=r"run `pin-match data prepare gso CHECKOUT --out SRC`, then pass --src"):
-        source.build(tmp_path / "out")
+    assert source.build(tmp_path / "default") == "built default"
+    source.build(tmp_path / "drawn", seed=3, src=tmp_path / "src", overwrite=True)
+    assert main(["synth", str(tmp_path / "cli"), "--quiet"]) == 0
+    assert calls == [("default", SynthSize(), None, False), ("drawn", SynthSize(seed=3), tmp_path / "src", True),
+                     ("cli", SynthSize(), None, False)]
     with pytest.raises(DataSourceError, match=r"reads 1 input\(s\) \(CHECKOUT\), got 0"):
         source.prepare([], tmp_path / "src")
     assert list(tmp_path.iterdir()) == []

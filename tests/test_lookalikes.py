@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from pin_match import atomic
+from pin_match.data.csv_rows import write_rows
 from pin_match.data.sources.lookalike_set import APPROACH_DISTANCES_M, build, plan_episodes
 from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
@@ -21,7 +22,6 @@ from pin_match.data.sources.photo_folder import (
     balanced_splits,
     instance_splits,
     load_photos,
-    write_csv,
 )
 from pin_match.data.sources.prepare import object_mask
 
@@ -113,12 +113,12 @@ def test_optional_columns_are_checked(tmp_path):
     rows = list(csv.DictReader(open(tmp_path / "photos.csv", encoding="utf-8")))
     for r in rows:
         r.update(split="test", use="")
-    write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
+    write_rows(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
     with pytest.raises(LookalikeError, match=r"photos.csv: photo 'mug1_0' has split 'test'"):
         load_photos(tmp_path)
     for r in rows:
         r.update(split="val", use="ref")
-    write_csv(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
+    write_rows(tmp_path / "photos.csv", (*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS), rows)
     with pytest.raises(LookalikeError, match="use 'ref'"):
         load_photos(tmp_path)
 
@@ -133,10 +133,10 @@ def _source(root, colours: dict[str, tuple[int, int, int]], per_instance: int = 
             rows.append(dict(photo_id=f"{inst}_{k}", instance_id=inst, category=inst[:-1],
                              file=f"photos/{inst}_{k}.png", mask=f"masks/{inst}_{k}.png",
                              source="test", source_path="-", licence="-"))
-    write_csv(root / "photos.csv", PHOTO_COLUMNS, rows)
+    write_rows(root / "photos.csv", PHOTO_COLUMNS, rows)
     room = np.clip(np.random.default_rng(7).normal(90, 20, (240, 320, 3)), 0, 255).astype(np.uint8)
     atomic.write_image(root / "rooms/r1.png", room)
-    write_csv(root / "rooms.csv", ROOM_COLUMNS,
+    write_rows(root / "rooms.csv", ROOM_COLUMNS,
                [dict(room_id="r1", file="rooms/r1.png", source="test", source_path="-", licence="-")])
 
 

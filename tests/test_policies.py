@@ -9,7 +9,8 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation.metrics import COUNT_KEYS, METRIC_KEYS, frame_arrays, threshold_metrics
-from pin_match.evaluation.policies import PolicyError, StopPolicy, found_frames, policy_metrics, tune_policy
+from pin_match.evaluation.policies import policy_metrics, tune_policy
+from pin_match.evaluation.stop import PolicyError, StopPolicy, found_frames
 
 
 def scored_episodes(roles: dict[str, str], scores: dict[str, list[float]]) -> pd.DataFrame:

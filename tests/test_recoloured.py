@@ -8,12 +8,12 @@ import pytest
 
 from pin_match import atomic
 from pin_match.data.compose import rotate_hue
+from pin_match.data.csv_rows import write_rows
 from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
     PHOTO_COLUMNS,
     LookalikeError,
     load_photos,
-    write_csv,
 )
 from pin_match.data.sources.prepare import copy_packaged_rooms
 from pin_match.data.sources.twins import add_recoloured_twins
@@ -34,7 +34,7 @@ def source(root, rows):
         mask = np.zeros((32, 32), np.uint8)
         mask[8:24, 8:24] = 255
         atomic.write_image(root / r["mask"], mask)
-    write_csv(root / "photos.csv", [*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS], rows)
+    write_rows(root / "photos.csv", [*PHOTO_COLUMNS, *OPTIONAL_PHOTO_COLUMNS], rows)
     copy_packaged_rooms(root)
     atomic.write_text(root / "NOTICE.md", "# Sources and licences of these photos\n\n- cups: CC BY 4.0, x/y\n")
     return root
@@ -76,7 +76,7 @@ def test_a_source_without_splits_is_refused_by_name(tmp_path):
     source(src, rows)
     for r in rows:
         del r["split"], r["use"]
-    write_csv(src / "photos.csv", PHOTO_COLUMNS, rows)
+    write_rows(src / "photos.csv", PHOTO_COLUMNS, rows)
     with pytest.raises(LookalikeError, match="photos.csv has no split column"):
         add_recoloured_twins(src, tmp_path / "out")
     assert not (tmp_path / "out").exists()

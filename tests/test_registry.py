@@ -10,6 +10,7 @@ import sys
 import textwrap
 import types
 from importlib.metadata import EntryPoint
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -230,6 +231,38 @@ def test_entry_point_matchers_are_found(monkeypatch, own_registry):
     monkeypatch.setattr(registry, "_entry_points", lambda: {"third-party": ep})
     assert "third-party" in list_matchers()
     assert create_matcher("third-party").default_sigma == 100.0
+
+
+@pytest.mark.parametrize("value, message", [
+    ("toy_nowhere:Toy", r"cannot be loaded: ModuleNotFoundError: No module named 'toy_nowhere'$"),
+    ("toys:NO_SUCH_CLASS", r"cannot be loaded: AttributeError: .*NO_SUCH_CLASS"),
+    ("pin_match:__version__", r"names a str, not a Matcher subclass$"),
+    ("pin_match.contract.matcher:Target", r"names pin_match\.contract\.matcher\.Target, not a Matcher subclass$"),
+])
+def test_a_broken_entry_point_is_named_as_a_data_sources_is(monkeypatch, own_registry, value, message):
+    """One loader for matchers and data sources (discovery.load): the same words, the matcher's error type."""
+    monkeypatch.setattr(registry, "_entry_points", lambda: {"toy-broken": _entry_point("toy-broken", value)})
+    with pytest.raises(RegistrationError, match=rf"^matcher entry point 'toy-broken' \({re.escape(value)}, group "
+                                                rf"pin_match\.matchers\) {message}"):
+        create_matcher("toy-broken")
+
+
+def test_every_package_folder_is_in_the_wheel():
+    """discovery imports the modules of subpackages too, but an installed wheel holds a subfolder only where
+    pyproject.toml lists it: every folder of pin_match/ and matchers/ with modules is a listed package."""
+    import tomllib
+
+    root = Path(__file__).resolve().parents[1]
+    setuptools = tomllib.loads((root / "pyproject.toml").read_text(encoding="utf-8"))["tool"]["setuptools"]
+    tops = {"pin_match": root / "pin_match", **{name: root / folder
+                                                for name, folder in setuptools["package-dir"].items()}}
+    found = set()
+    for name, top in tops.items():
+        for folder in [top, *(d for d in top.rglob("*") if d.is_dir() and d.name != "__pycache__")]:
+            if any(folder.glob("*.py")):
+                assert (folder / "__init__.py").is_file(), f"{folder} holds modules but no __init__.py"
+                found.add(".".join((name, *folder.relative_to(top).parts)))
+    assert found == set(setuptools["packages"])
 
 
 def test_register_rejects_non_matchers_and_clashes():

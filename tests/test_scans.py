@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import re
 import shutil
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -206,6 +207,29 @@ def test_the_shipped_folder_opens_whole():
     assert "CC BY 4.0" in notice and "96 scans" in notice
     missing = [name for name in folder.scans if f"- `{name}`: {folder.scans[name]['source']}" not in notice]
     assert missing == []
+
+
+def test_the_shipped_families_are_what_the_docs_and_the_default_size_say():
+    """docs/synthetic.md and SynthSize's docstring count the splits: 51 / 45 instances, 15 families each."""
+    from collections import Counter
+
+    from pin_match.data.synth import SynthSize
+
+    members = ScanFolder.open().members
+    per_split = Counter(m.split for m in members)
+    families = {split: Counter(m.family for m in members if m.split == split) for split in ("train", "val")}
+    with_lookalike = {split: {f for f, n in counted.items() if n >= 2} for split, counted in families.items()}
+    every = {m.family for m in members}
+    assert (per_split["train"], per_split["val"]) == (51, 45)
+    assert {split: sorted(every - found) for split, found in with_lookalike.items()} == \
+        dict(train=["file sorter", "mug"], val=["portable drive", "shoes"])
+    assert SynthSize().episodes // 2 == len(with_lookalike["val"]) == len(with_lookalike["train"]) == 15
+    kinds = {kind: {m.family for m in members if m.split == "val" and m.difference == kind}
+             for kind in ("print", "colour", "shape")}
+    assert {kind: len(found) for kind, found in kinds.items()} == dict(print=7, colour=5, shape=4)
+    doc = (Path(__file__).resolve().parents[1] / "docs" / "synthetic.md").read_text(encoding="utf-8")
+    assert "51 train and 45 val instances" in doc and "(51 train / 45 val instances by default)" in doc
+    assert "7 print families, 5 with colour differences, 4 with shape" in doc
 
 
 def test_every_shipped_scan_loads_and_stands_on_the_floor():

@@ -15,6 +15,7 @@ DATA_HELP = """Frame-set sources, one catalogue: list them, prepare one from its
 
   pin-match data list                                  every source: variants, what prepare reads, licence
   pin-match data build core50 OUT [--variant pasted]   a source's frame-set (shipped photos: offline)
+  pin-match data build gso OUT                         the synthetic default set (as `pin-match synth OUT`)
   pin-match data prepare grocery GROCERY_REPO --out SRC
   pin-match data build grocery OUT --src SRC           a downloaded source: prepare once, then build
   pin-match data cohort FRAMESET OUT                   its objects' views as a cohort for cohort-norm
@@ -68,8 +69,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--variant", help="the source's variant (default: its first, see `pin-match data list`)")
     s.add_argument("--seed", type=int, default=0, help="seed of every random choice (default 0); same seed, "
                                                        "same bytes")
-    s.add_argument("--src", type=Path, help="source folder written by `pin-match data prepare` (core50: default "
-                                            "the one shipped with pin_match)")
+    s.add_argument("--src", type=Path, help="source folder written by `pin-match data prepare` (core50, gso: "
+                                            "default the one shipped with pin_match)")
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_build)
 

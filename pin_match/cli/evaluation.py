@@ -16,16 +16,18 @@ from pin_match.cli.args import (
     add_bench_config,
     add_matcher_config,
     add_run_options,
+    add_scheduler,
     bench_overrides,
+    engine_run,
     matcher_overrides,
-    run_options,
 )
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.scoring.cache import cache_dir
 from pin_match.scoring.table import ScoreTable
 
-WORKERS_HELP = "worker processes/threads (default: up to 2 for scoring, all cores for rendering)"
+WORKERS_HELP = ("worker processes/threads (default: up to 2 for scoring, all cores for rendering); with "
+                "--scheduler local, the Dask worker processes that score")
 
 
 class UsageError(PinMatchError, ValueError):
@@ -102,8 +104,9 @@ def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.index_page import SetResults, write_index
     from pin_match.evaluation.tables import markdown_table
 
-    done = bench(a.frameset, bench_overrides(a.cfg, a.matcher), a.out, objective=a.objective,
-                 sigma_from=a.sigma_from, run=run_options(a))
+    overrides = bench_overrides(a.cfg, a.matcher)
+    with engine_run(a) as run:
+        done = bench(a.frameset, overrides, a.out, objective=a.objective, sigma_from=a.sigma_from, run=run)
     print(markdown_table(done.joint))
     comparisons = compare_bench(done.run)
     if comparisons:
@@ -122,7 +125,8 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     sets = [replace(s, matchers=tuple(picked[s.name] or s.matchers)) for s in DEMO_SETS
             if not (a.no_lookalikes and s is LOOKALIKES)]
     watch = Stopwatch()
-    results = demo(a.out, sets, seed=a.seed, run=run_options(a), watch=watch)
+    with engine_run(a) as run:
+        results = demo(a.out, sets, seed=a.seed, run=run, watch=watch)
     for r in results:
         print(f"\nPIN detection metrics on {r.caption}; {r.bench.caption}\n")
         print(markdown_table(r.bench.joint))
@@ -153,11 +157,12 @@ def _cmd_carry(a: argparse.Namespace) -> None:
         ctx.fs.split(reading)  # a split the set lacks is named here
         contexts[item] = (ctx, "train" if "train" in splits else None, reading)
     scored: dict[str, dict[str, ScoredSet]] = {label: {} for label in variants}
-    for item, (ctx, tuning, reading) in contexts.items():  # the variants in one pass: a shared part runs once
-        for label, table in zip(variants, score_many(ctx.fs, list(variants.values()), out=a.cache,
-                                                     run=run_options(a))):
-            scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
-                                            clusters=ctx.clusters)
+    with engine_run(a) as run:
+        for item, (ctx, tuning, reading) in contexts.items():  # the variants in one pass: a shared part runs once
+            tables = score_many(ctx.fs, list(variants.values()), out=a.cache, run=run)
+            for label, table in zip(variants, tables):
+                scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
+                                                clusters=ctx.clusters)
     boot = Bootstrap(n_boot=a.bootstrap)
     columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
                "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",
@@ -202,14 +207,22 @@ def _table_arguments(s: argparse.ArgumentParser) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SCANNED
+    for add in (_add_tune, _add_report, _add_similarity, _add_bench, _add_carry, _add_demo):
+        add(sub)
+
+
+def _objective_argument(s: argparse.ArgumentParser) -> None:
     from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
-    objective_help = f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)"
+    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES),
+                   help=f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)")
+
+
+def _add_tune(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("tune", help="choose sigma on one split (train by default); writes thresholds/<matcher>.json",
                        description="Choose a matcher's sigma on one split of the frame-set it was scored on.")
     _table_arguments(s)
-    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    _objective_argument(s)
     s.add_argument("--split", default="train",
                    help="split to tune on (default train; tuning on the split you report is optimistic)")
     s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
@@ -218,6 +231,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                         "1-of-1, PIN's rule; docs/metrics.md)")
     s.set_defaults(func=_cmd_tune)
 
+
+def _add_report(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("report", help="metrics, tables and plots of a score table at one sigma",
                        description="Metrics, tables and plots of one split at one sigma. Sigma: --threshold, else "
                                    "--thresholds, else the matcher's default; every output says which.")
@@ -232,6 +247,8 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                    help=f"report folder (default {outputs.REPORTS}/<matcher@hash>/<fingerprint>/<split>)")
     s.set_defaults(func=_cmd_report)
 
+
+def _add_similarity(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("similarity", help="intra/inter-category similarity of frontal references")
     s.add_argument("frameset", type=Path, help="frame-set whose objects are compared")
     s.add_argument("--matcher", required=True, help="registered matcher whose embedding is used")
@@ -240,19 +257,24 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--out", type=Path, help=f"output folder (default {outputs.SIMILARITY}/<matcher@hash>)")
     s.set_defaults(func=_cmd_similarity)
 
+
+def _add_bench(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("bench", help="score, choose sigma (tuned on train) and report val for several matchers")
     s.add_argument("frameset", type=Path, help="frame-set to score (needs a val split)")
     s.add_argument("--matcher", action="append", required=True, help="matcher to include (repeatable)")
     s.add_argument("--out", type=Path, default=outputs.BENCH,
                    help=f"folder of scores, thresholds, reports, table.md/.tex/.csv (default {outputs.BENCH})")
-    s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES), help=objective_help)
+    _objective_argument(s)
     s.add_argument("--sigma-from", default="train", metavar="SPLIT|default|paper",
                    help="tune sigma on this split (default train), or use each matcher's 'default' or the 'paper' "
                         "sigma; the tables say which")
     add_bench_config(s)
     add_run_options(s, workers=WORKERS_HELP)
+    add_scheduler(s)
     s.set_defaults(func=_cmd_bench)
 
+
+def _add_carry(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("carry", help="how far one sigma carries: chosen on every other frame-set, read on each",
                        description="Leave one frame-set out: sigma chosen (first-match objective) on the train "
                                    "splits of all the others (all frames of a set without one), read on its val "
@@ -268,7 +290,12 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                         "variant's rows, then per set the variant chosen on the other sets alone (needs three sets)")
     s.add_argument("--json", type=Path, help="write the rows here")
     add_run_options(s, workers=WORKERS_HELP)
+    add_scheduler(s)
     s.set_defaults(func=_cmd_carry)
+
+
+def _add_demo(sub: argparse._SubParsersAction) -> None:
+    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SCANNED
 
     scanned, real = SCANNED, LOOKALIKES
     s = sub.add_parser("demo", help="the whole job on scanned look-alikes rendered along PIN walks and on real "
@@ -282,4 +309,5 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--seed", type=int, default=0,
                    help="seed of the demo's frame-sets (default 0); a set built with another is built again")
     add_run_options(s, workers=WORKERS_HELP)
+    add_scheduler(s)
     s.set_defaults(func=_cmd_demo)

@@ -80,10 +80,7 @@ def _cmd_merge(a: argparse.Namespace) -> None:
     print(f"merged {len(a.parts)} parts, {len(table.frames)} frames -> {a.out}")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
-    sub = p.add_subparsers(dest="command", required=True)
-
+def _add_synth(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("synth", help="generate a synthetic PIN-like frame-set of chosen sizes (docs/synthetic.md; "
                                      "every other source: `pin-match data`)")
     s.add_argument("out", type=Path, help="frame-set folder to create")
@@ -100,6 +97,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at OUT")
     s.set_defaults(func=_cmd_synth)
 
+
+def _add_import(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("import", help="build a frame-set from a PIN recording folder (layout: docs/frameset.md)",
                        description=IMPORT_HELP, formatter_class=argparse.RawDescriptionHelpFormatter)
     s.add_argument("recording", type=Path, help="recording folder: episodes.json[.gz] and one folder per episode")
@@ -115,6 +114,8 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--overwrite", action="store_true", help="replace an existing frame-set at --out")
     s.set_defaults(func=_cmd_import)
 
+
+def _add_score_and_merge(sub: argparse._SubParsersAction) -> None:
     s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
     s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")
     s.add_argument("--matcher", required=True, help="registered matcher name (`pin-match list`)")
@@ -133,13 +134,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", type=Path, required=True, help="merged table to write (parquet)")
     s.set_defaults(func=_cmd_merge)
 
-    catalog.add_commands(sub)
 
-    data.add_commands(sub)
-    evaluation.add_commands(sub)
-    pages.add_commands(sub)
-    training.add_commands(sub)
-    fitting.add_commands(sub)
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="pin-match", description=__doc__.splitlines()[0])
+    sub = p.add_subparsers(dest="command", required=True)
+    _add_synth(sub)
+    _add_import(sub)
+    _add_score_and_merge(sub)
+    for group in (catalog, data, evaluation, pages, training, fitting):
+        group.add_commands(sub)
     return p
 
 

@@ -1,10 +1,13 @@
 """How plug-ins are found, one rule for the matcher registry and the data-source catalogue.
 
 A built-in is a module of a package that registers what it holds as it is imported:
-``import_package`` imports every module of that package once (subfolders included), so a new
-file there is all a built-in needs and nothing lists the files. A third party declares its
-plug-ins in an entry-point group: ``declared`` lists them by name without importing any, and
-refuses a name that two installed packages declare rather than letting one silently win.
+``import_package`` imports every module of that package once, those of its subpackages too (a
+subfolder with an ``__init__.py``; an installed wheel holds one only where pyproject.toml lists
+it among the packages, which tests/test_registry.py checks), so a new file there is all a
+built-in needs and nothing lists the files. A third party declares its plug-ins in an
+entry-point group: ``declared`` lists them by name without importing any, and refuses a name
+that two installed packages declare rather than letting one silently win; ``load`` imports the
+one asked for, naming the entry point when that fails.
 """
 
 from __future__ import annotations
@@ -13,6 +16,7 @@ import importlib
 import pkgutil
 import types
 from importlib.metadata import EntryPoint, entry_points
+from typing import Any
 
 from pin_match.errors import PinMatchError
 
@@ -48,3 +52,16 @@ def declared(group: str, error: type[PinMatchError], what: str) -> dict[str, Ent
                         f"uninstall one of their packages")
         found[ep.name] = ep
     return found
+
+
+def described(ep: EntryPoint) -> str:
+    """An entry point as every message about it names it: its name, what it points at and its group."""
+    return f"entry point {ep.name!r} ({ep.value}, group {ep.group})"
+
+
+def load(ep: EntryPoint, error: type[PinMatchError], what: str) -> Any:
+    """The object ``ep`` names; whatever importing it raises is ``error`` naming ``what`` and the entry point."""
+    try:
+        return ep.load()
+    except Exception as exc:  # whatever importing a third party's module raises, it is that package's fault
+        raise error(f"{what} {described(ep)} cannot be loaded: {type(exc).__name__}: {exc}") from exc

@@ -24,8 +24,9 @@ class Preset:
     Variants of a matcher (EfficientNet-Lite0, -Lite1, -Lite2; DINO and DINOv2) differ only in
     a few config defaults (the network, its input size), their weights, their default sigma
     and paper. As in timm's table of model configs, a matcher module keeps one class with the
-    algorithm and a table of presets; each name is still a class statement, because the
-    registry reads names from decorated classes without importing the file::
+    algorithm and a table of presets; each name is still a class statement, because a name is
+    registered by decorating a class as its module is imported (``contract.registry``), and a
+    Dask worker rebuilds a matcher from its class pickled by reference::
 
         @register_matcher("effnet-lite1")
         class EffnetLite1Matcher(EffnetMatcher, preset=EFFNET_PRESETS["effnet-lite1"]):

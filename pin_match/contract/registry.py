@@ -1,14 +1,15 @@
 """Find matchers by name: a class decorated with ``@register_matcher("name")`` registers itself at import.
 
 That is timm's registry, plainly: importing a module registers what it decorates. The built-ins
-are the modules of ``pin_match.matchers`` (the top-level ``matchers/`` folder, subfolders
-included), all imported the first time a name is listed or asked for, so a new file there is all
-a built-in needs and no rule says how the decorator must be written. Importing them costs what
-torch costs (docs/performance.md); ``pin-match list`` builds every matcher to show its modality,
-sigma and weights, so it would import them anyway. Third-party packages add matchers through the
-``pin_match.matchers`` entry-point group, imported only when their name is asked for. A name
-belongs to one class: a second class claiming it (a plug-in taking a built-in's name, two entry
-points, two decorated modules) is refused, naming both, instead of the last one silently winning.
+are the modules of ``pin_match.matchers`` (the top-level ``matchers/`` folder, subpackages
+included: ``discovery``), all imported the first time a name is listed or asked for, so a new
+file there is all a built-in needs and no rule says how the decorator must be written. Importing
+them costs what torch costs (docs/performance.md); ``pin-match list`` builds every matcher to show
+its modality, sigma and weights, so it would import them anyway. Third-party packages add matchers
+through the ``pin_match.matchers`` entry-point group, imported only when their name is asked for
+(``discovery.load``, the data sources' loader too). A name belongs to one class: a second class
+claiming it (a plug-in taking a built-in's name, two entry points, two decorated modules) is
+refused, naming both, instead of the last one silently winning.
 """
 
 from __future__ import annotations
@@ -88,10 +89,19 @@ def _entry_points() -> dict[str, EntryPoint]:
     return discovery.declared(ENTRY_POINT_GROUP, RegistrationError, "matcher name")
 
 
+def _load(ep: EntryPoint) -> type[Matcher]:
+    """The matcher class an entry point names, or what is wrong with the entry point."""
+    cls = discovery.load(ep, RegistrationError, "matcher")
+    if not (isinstance(cls, type) and issubclass(cls, Matcher)):
+        named = _dotted(cls) if isinstance(cls, type) else f"a {type(cls).__name__}"
+        raise RegistrationError(f"matcher {discovery.described(ep)} names {named}, not a Matcher subclass")
+    return cls
+
+
 def _check_entry_point(name: str, ep: EntryPoint) -> None:
     """Refuse an entry point whose name another class holds (it would be ignored without a word)."""
     if name in _REGISTRY and _dotted(_REGISTRY[name]) != f"{ep.module}.{ep.attr}":
-        _refuse_second_claim(name, _dotted(ep.load()))  # a re-exported class is the same class: load to know
+        _refuse_second_claim(name, _dotted(_load(ep)))  # a re-exported class is the same class: load to know
 
 
 def available_names() -> list[str]:
@@ -112,7 +122,7 @@ def get_matcher_class(name: str) -> type[Matcher]:
     if name not in _REGISTRY:
         ep = _entry_points().get(name)
         if ep is not None:
-            cls = ep.load()
+            cls = _load(ep)
             if name not in _REGISTRY:  # an entry point may name a class that is not decorated
                 register_matcher(name)(cls)
     if name not in _REGISTRY:

@@ -18,6 +18,7 @@ import pandas as pd
 
 from pin_match import atomic
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, Target, TargetError
+from pin_match.data.geometry import Geometry, missing_reason, read_geometry
 from pin_match.data.images import read_image, read_label_png
 from pin_match.errors import PinMatchError
 
@@ -57,6 +58,7 @@ class FrameSet:
     episode_records: list[dict]
     frames: pd.DataFrame
     visibility: pd.DataFrame
+    geometry: Geometry | None = None  # camera poses, object positions, geodesic lengths (``data.geometry``)
     split_name: str | None = None  # a view of one split (``split``) keeps the whole set's fingerprint
 
     def __post_init__(self) -> None:
@@ -91,7 +93,8 @@ class FrameSet:
         visibility = _read_table(root / VISIBILITY,
                                  ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1"])
         _check_visibility(root, visibility, frames, objects)
-        return cls(root, manifest, objects, descriptions, episodes, records, frames, visibility)
+        geometry = read_geometry(root, manifest, frames, records)
+        return cls(root, manifest, objects, descriptions, episodes, records, frames, visibility, geometry)
 
     # ----------------------------------------------------------------- access
     def _frame(self, frame_id: str) -> pd.Series:
@@ -154,9 +157,14 @@ class FrameSet:
         visibility = self.visibility[self.visibility.frame_id.isin(frames.frame_id)].reset_index(drop=True)
         records = [r for r in self.episode_records if r["episode_id"] in set(episodes.episode_id)]
         sub = FrameSet(self.root, self.manifest, self.objects, self.descriptions, episodes, records, frames,
-                       visibility, split)
+                       visibility, self.geometry, split)
         sub.__dict__["fingerprint"] = self.fingerprint
         return sub
+
+    @property
+    def navigation_missing(self) -> str | None:
+        """Why PIN's navigation metrics cannot be estimated on this frame-set (None when they can)."""
+        return missing_reason(self.manifest, self.frames)
 
     @cached_property
     def fingerprint(self) -> str:

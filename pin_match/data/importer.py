@@ -35,13 +35,16 @@ from pin_match.data.frameset import (
     FrameSet,
     FrameSetError,
 )
+from pin_match.data.geometry import CameraModel, EpisodeGeometry, GeometryError, Pose
 from pin_match.data.images import read_image
-from pin_match.data.writer import FrameSetWriter, ImageFile
+from pin_match.data.writer import Frame, FrameSetWriter, ImageFile
 
 TARGET_ID, SAME_CATEGORY_ID, OTHER_ID = 100000, 100001, 100002
 # PIN label -> (mask value, role) in the frame-set's instance mask
 LABELS = {TARGET_ID: (1, "target"), SAME_CATEGORY_ID: (2, "same_category"), OTHER_ID: (3, "other")}
 IMAGE_FORMATS = ("source", "png", "jpeg")
+POSES = "poses.json"  # per episode (``FrameRecorder``): camera hfov and height, and per step gps, compass, pitch
+PIN_HFOV_DEG, PIN_CAMERA_HEIGHT = 42.0, 1.31  # PIN's RGB camera
 JPEG_SUFFIXES = (".jpg", ".jpeg")
 
 
@@ -97,9 +100,11 @@ def import_recording(recording: str | Path, objects: str | Path, out: str | Path
     episodes = _load_episodes(recording)
     descriptions = _descriptions(objects)
     categories, splits = _objects_of(episodes, split, recording)
+    poses = _recorded_poses(recording, episodes)
+    camera = None if poses is None else CameraModel(_same_camera(poses, recording)["hfov_deg"])
     writer = FrameSetWriter(out, name or recording.name, overwrite=overwrite,
                             provenance=dict(importer="pin_match.data.importer", recording=str(recording),
-                                            image_format=image_format))
+                                            image_format=image_format), camera=camera)
     with writer:
         for object_id, category in categories.items():
             if object_id not in descriptions:
@@ -112,7 +117,11 @@ def import_recording(recording: str | Path, objects: str | Path, out: str | Path
             target = str(ep["goals"][0]["object_id"])
             writer.add_episode(episode_id, _split(ep, split), str(ep.get("scene_id", "")), target,
                                [str(d["object_id"]) for d in ep.get("distractors", [])])
-            _import_episode(writer, recording / episode_id, episode_id, target, image_format)
+            steps = None
+            if poses is not None:
+                writer.add_geometry(episode_id, episode_in_start_frame(ep, recording))
+                steps = poses[episode_id]
+            _import_episode(writer, recording / episode_id, (episode_id, target), image_format, steps)
         return writer.close()
 
 
@@ -159,7 +168,10 @@ def reference_files(folder: Path, object_id: str) -> list[Path]:
     return out
 
 
-def _import_episode(writer: FrameSetWriter, folder: Path, episode_id: str, target: str, image_format: str) -> None:
+def _import_episode(writer: FrameSetWriter, folder: Path, ids: tuple[str, str], image_format: str,
+                    poses: dict | None) -> None:
+    """One recorded episode's frames (``ids``: its id and its target's), each with its camera pose when recorded."""
+    episode_id, target = ids
     rgb = _frame_files(folder / "rgb", IMAGE_SUFFIXES)
     if not rgb:
         raise FrameSetError(f"episode {episode_id!r}: no RGB frames in {folder / 'rgb'}")
@@ -186,7 +198,9 @@ def _import_episode(writer: FrameSetWriter, folder: Path, episode_id: str, targe
                 raise FrameSetError(f"{depth[step]}: must be depth in metres of shape {mask.shape}, got "
                                     f"{d.dtype} {d.shape}")
             d = d.reshape(mask.shape).astype(np.float32)
-        writer.add_frame(episode_id, step, image, mask, legend, d, file=_stored_image(rgb[step], image_format))
+        pose = None if poses is None else _camera_pose(poses, step, folder / POSES)
+        writer.write_frame(episode_id, step, Frame(image, mask, legend, d, pose),
+                           _stored_image(rgb[step], image_format))
 
 
 def _stored_image(path: Path, image_format: str) -> ImageFile:
@@ -203,3 +217,79 @@ def _load_array(path: Path) -> np.ndarray:
         return np.load(path, allow_pickle=False)
     except (OSError, ValueError, EOFError) as exc:
         raise FrameSetError(f"cannot read array {path}: {exc}") from exc
+
+
+# ------------------------------------------------------------------ geometry: Habitat's frames into the house frame
+def _recorded_poses(recording: Path, episodes: list[dict]) -> dict[str, dict] | None:
+    """Each episode's ``poses.json`` when every episode has one, None when none has; a mix is refused."""
+    found = {str(ep["episode_id"]): recording / str(ep["episode_id"]) / POSES for ep in episodes}
+    have = [e for e, p in found.items() if p.is_file()]
+    if not have:
+        return None
+    lacking = sorted(set(found) - set(have))
+    if lacking:
+        raise GeometryError(f"{recording}: episode {have[0]!r} recorded the agent's poses ({POSES}) but episode "
+                            f"{lacking[0]!r} did not: record gps and compass in every episode or in none")
+    out = {}
+    for episode_id, path in found.items():
+        data = atomic.read_json(path, GeometryError, "recorded poses")
+        steps = data.get("gps_compass_pitch") if isinstance(data, dict) else None
+        if not isinstance(steps, list) or not all(isinstance(s, list) and len(s) == 4 for s in steps):
+            raise GeometryError(f"{path}: expected {{'gps_compass_pitch': [[forward, right, compass, pitch], ...]}}")
+        out[episode_id] = data
+    return out
+
+
+def _same_camera(poses: dict[str, dict], recording: Path) -> dict:
+    cameras = {(float(p.get("hfov_deg", PIN_HFOV_DEG)), float(p.get("camera_height", PIN_CAMERA_HEIGHT)))
+               for p in poses.values()}
+    if len(cameras) > 1:
+        raise GeometryError(f"{recording}: episodes recorded with different cameras {sorted(cameras)}: one "
+                            "frame-set has one camera")
+    hfov, height = cameras.pop()
+    return {"hfov_deg": hfov, "camera_height": height}
+
+
+def _camera_pose(poses: dict, step: int, path: Path) -> Pose:
+    """PIN's gps (forward, right from the start) and compass (left positive) as a pose in the start frame
+    (x forward, y left, z up: home-robot's reading of the same sensors)."""
+    steps = poses["gps_compass_pitch"]
+    if step >= len(steps):
+        raise GeometryError(f"{path}: no pose for step {step} (it holds {len(steps)})")
+    forward, right, compass, pitch = (float(v) for v in steps[step])
+    return Pose(forward, -right, float(poses.get("camera_height", PIN_CAMERA_HEIGHT)), compass, pitch)
+
+
+def episode_in_start_frame(ep: dict, recording: Path) -> EpisodeGeometry:
+    """PIN's episode geometry (Habitat's world frame: y up, the agent looking along -z) in the episode's start frame,
+    where the recorded gps and compass place the agent: the start at the origin facing +x, z up."""
+    where = f"{recording}: episode {ep.get('episode_id')!r}"
+    try:
+        origin = np.asarray(ep["start_position"], np.float64)
+        rotation = np.asarray(ep["start_rotation"], np.float64)
+        geodesic = float(ep["info"]["geodesic_distance"])
+        positions = {str(g["object_id"]): _into_start(np.asarray(g["position"], np.float64), origin, rotation)
+                     for g in [ep["goals"][0], *ep.get("distractors", [])] if "position" in g}
+        target = str(ep["goals"][0]["object_id"])
+        if target not in positions or origin.shape != (3,) or rotation.shape != (4,):
+            raise KeyError("goals[0].position")
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GeometryError(f"{where} has recorded poses but lacks PIN's geometry field {exc} (start_position, "
+                            "start_rotation, info.geodesic_distance, goals[0].position)") from exc
+    return EpisodeGeometry(Pose(0.0, 0.0, 0.0, 0.0), geodesic, positions, {})
+
+
+def _into_start(point: np.ndarray, origin: np.ndarray, rotation_xyzw: np.ndarray) -> tuple[float, float, float]:
+    """A Habitat world point in the start frame: rotated by the inverse of the start rotation, then (x right, y up,
+    z back) read as (x forward, y left, z up)."""
+    v = _rotate_inverse(rotation_xyzw, point - origin)
+    return float(-v[2]), float(-v[0]), float(v[1])
+
+
+def _rotate_inverse(q_xyzw: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v`` rotated by the conjugate of the unit quaternion ``q`` ([x, y, z, w], Habitat's coefficient order)."""
+    norm = float(np.linalg.norm(q_xyzw))
+    if not np.isfinite(norm) or norm == 0.0:
+        raise ValueError(f"start_rotation {q_xyzw.tolist()} is not a rotation")
+    u, w = -q_xyzw[:3] / norm, q_xyzw[3] / norm
+    return v + 2.0 * w * np.cross(u, v) + 2.0 * np.cross(u, np.cross(u, v))

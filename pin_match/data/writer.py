@@ -36,6 +36,7 @@ from pin_match.data.frameset import (
     FrameSet,
     FrameSetError,
 )
+from pin_match.data.geometry import POSE_COLUMNS, CameraModel, EpisodeGeometry, GeometryError, Pose
 
 VISIBILITY_COLUMNS = ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1", "depth"]
 
@@ -45,13 +46,15 @@ class Frame:
     """One camera frame as a source hands it over: the image, its instance mask, what each mask value is, depth.
 
     ``mask`` holds per-pixel values (0 = background); ``legend`` maps each value to
-    (object id or None when the recording cannot tell instances apart, role). Depth is in metres.
+    (object id or None when the recording cannot tell instances apart, role). Depth is in metres
+    along the view axis (0 or NaN: no hit); ``pose`` is the camera's in the episode's house frame.
     """
 
     image: np.ndarray
     mask: np.ndarray
     legend: Mapping[int, tuple[str | None, str]]
     depth: np.ndarray | None = None
+    pose: Pose | None = None
 
 
 @dataclass(frozen=True)
@@ -115,10 +118,15 @@ def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
     row = dict(frame_id=frame_id, episode_id=episode_id, step=int(step), image=rel_image, mask=rel_mask,
                height=int(image.shape[0]), width=int(image.shape[1]),
                sha256=hashlib.sha256((root / rel_image).read_bytes()).hexdigest())
+    if frame.pose is not None:
+        row.update(frame.pose.row())
     depth_mm = None
     if depth is not None:
         if depth.shape != mask.shape:
             raise FrameSetError(f"frame {frame_id}: depth shape {depth.shape} differs from mask {mask.shape}")
+        if (np.nan_to_num(depth) < 0).any():
+            raise GeometryError(f"frame {frame_id}: depth holds negative values (min {np.nanmin(depth):g} m); "
+                                "depth is metres along the view axis, 0 where nothing was hit")
         depth_mm = np.clip(np.round(np.nan_to_num(depth) * 1000.0), 0, 65535).astype(np.uint16)
         row["depth"] = f"depth/{episode_id}/{step:04d}.png"
         atomic.write_image(root / row["depth"], depth_mm)
@@ -165,7 +173,9 @@ class FrameSetWriter:
     """Collects objects, episodes and frames, then publishes the frame-set atomically."""
 
     def __init__(self, root: str | Path, name: str | None = None, *, overwrite: bool = False,
-                 provenance: dict | None = None, image_ext: str = ".jpg") -> None:
+                 provenance: dict | None = None, image_ext: str = ".jpg", camera: CameraModel | None = None) -> None:
+        """``camera``: the frames' camera when the producer knows the geometry; then every frame needs a pose and
+        every episode its ``EpisodeGeometry`` (``data.geometry``)."""
         self.root = Path(root)
         if self.root.exists() and not overwrite:
             raise FrameSetError(f"{self.root} already exists: pass --overwrite (overwrite=True) to replace it")
@@ -178,6 +188,8 @@ class FrameSetWriter:
         self.name = name or self.root.name
         self.provenance = provenance or {}
         self.image_ext = image_ext
+        self.camera = camera
+        self._geometry: set[str] = set()
         self._objects: dict[str, dict] = {}
         self._descriptions: dict[str, list[str]] = {}
         self._episodes: dict[str, dict] = {}
@@ -206,7 +218,7 @@ class FrameSetWriter:
         self._descriptions[object_id] = list(descriptions)
 
     def add_episode(self, episode_id: str, split: str, scene_id: str, target_object_id: str,
-                    distractor_object_ids: Sequence[str]) -> None:
+                    distractor_object_ids: Sequence[str], geometry: EpisodeGeometry | None = None) -> None:
         check_id("episode", episode_id)
         if episode_id in self._episodes:
             raise FrameSetError(f"episode id {episode_id!r} added twice")
@@ -220,6 +232,18 @@ class FrameSetWriter:
         self._episodes[episode_id] = dict(episode_id=episode_id, split=split, scene_id=scene_id,
                                           goals=[goal(target_object_id)],
                                           distractors=[goal(o) for o in distractor_object_ids])
+        if geometry is not None:
+            self.add_geometry(episode_id, geometry)
+
+    def add_geometry(self, episode_id: str, geometry: EpisodeGeometry) -> None:
+        """An episode's start, geodesic lengths and object positions (a renderer knows them once it has placed
+        the objects); a writer with a camera needs them for every episode by ``close``."""
+        if self.camera is None:
+            raise GeometryError(f"episode {episode_id!r}: geometry given to a writer without a camera (pass camera=)")
+        if episode_id not in self._episodes:
+            raise FrameSetError(f"geometry of unknown episode id {episode_id!r}")
+        self._episodes[episode_id] = geometry.annotate(self._episodes[episode_id])
+        self._geometry.add(episode_id)
 
     def roles(self, episode_id: str) -> dict[str, str]:
         """Object id -> role for every object placed in an episode."""
@@ -235,10 +259,13 @@ class FrameSetWriter:
                   file: ImageFile | None = None) -> str:
         """Write one frame of a known episode (see ``Frame``); its image encoded as the writer's ``image_ext``
         unless ``file`` says otherwise. Returns its frame id."""
+        return self.write_frame(episode_id, step, Frame(image, mask, legend, depth), file)
+
+    def write_frame(self, episode_id: str, step: int, frame: Frame, file: ImageFile | None = None) -> str:
+        """``add_frame`` for a whole ``Frame`` (with its camera pose, when the producer knows it)."""
         if episode_id not in self._episodes:
             raise FrameSetError(f"frame of unknown episode id {episode_id!r}")
-        rec = encode_frame(self.staging, episode_id, step, Frame(image, mask, legend, depth),
-                           file or ImageFile(self.image_ext))
+        rec = encode_frame(self.staging, episode_id, step, frame, file or ImageFile(self.image_ext))
         self.add_frame_record(rec)
         return rec.frame["frame_id"]
 
@@ -256,18 +283,36 @@ class FrameSetWriter:
         atomic.write_json(s / DESCRIPTIONS, self._descriptions)
         atomic.write_json(s / EPISODES, {"episodes": list(self._episodes.values())})
         frames = pd.DataFrame(self._frames).sort_values(["episode_id", "step"], kind="stable")
+        self._check_poses(frames)
         atomic.write_parquet(s / FRAMES, frames.reset_index(drop=True))
         vis = pd.DataFrame(self._visibility, columns=VISIBILITY_COLUMNS)
         vis = vis.sort_values(["frame_id", "mask_value"], kind="stable").reset_index(drop=True)
         if vis["depth"].isna().all():
             vis = vis.drop(columns="depth")
         atomic.write_parquet(s / VISIBILITY, vis)
-        atomic.write_json(s / MANIFEST, dict(format=FORMAT_NAME, version=FORMAT_VERSION, name=self.name,
-                                             depth="depth" in frames.columns, provenance=self.provenance))
+        manifest = dict(format=FORMAT_NAME, version=FORMAT_VERSION, name=self.name, depth="depth" in frames.columns,
+                        provenance=self.provenance)
+        if self.camera is not None:
+            manifest["geometry"] = self.camera.manifest()
+        atomic.write_json(s / MANIFEST, manifest)
         if self.root.exists():
             shutil.rmtree(self.root)
         s.rename(self.root)
         return FrameSet.load(self.root)
+
+    def _check_poses(self, frames: pd.DataFrame) -> None:
+        """Poses on every frame and geometry in every episode when the writer has a camera, no pose without one:
+        a half-placed walk is refused."""
+        if self.camera is not None:
+            lacking = sorted(set(self._episodes) - self._geometry)
+            if lacking:
+                raise GeometryError(f"episode {lacking[0]!r} has no geometry, but the writer has a camera")
+        posed = frames[POSE_COLUMNS[0]].notna() if POSE_COLUMNS[0] in frames.columns else pd.Series(False, frames.index)
+        wrong = frames[~posed] if self.camera is not None else frames[posed]
+        if len(wrong):
+            said = "has no camera pose, but the writer has a camera" if self.camera is not None else \
+                "has a camera pose, but the writer has no camera (pass camera=)"
+            raise GeometryError(f"frame {wrong.frame_id.iloc[0]!r} {said}")
 
     def abort(self) -> None:
         shutil.rmtree(self.staging, ignore_errors=True)

@@ -30,6 +30,7 @@ from pin_match.evaluation.metrics import (
     localisation_metrics,
     per_category,
 )
+from pin_match.evaluation.navigation import Placements, episodes_at, navigation_metrics
 from pin_match.evaluation.sigma import SigmaChoice, way_out
 from pin_match.scoring.table import ScoreTable
 
@@ -56,6 +57,7 @@ class EvalContext:
         self.fs = fs
         self.boot = boot
         self._scored: dict[tuple[int, str | None], tuple[ScoreTable, pd.DataFrame, FrameArrays]] = {}
+        self._placements: dict[tuple[int, str | None], Placements] = {}
 
     @classmethod
     def of(cls, data: FrameSet | str | Path | EvalContext) -> EvalContext:
@@ -86,6 +88,15 @@ class EvalContext:
         """``scored`` as the arrays every metric reads."""
         return self._split(table, split)[2]
 
+    def placements(self, table: ScoreTable, split: str | None) -> Placements:
+        """``navigation.Placements`` of one split (each frame's points placed in the house once, for every sigma);
+        a frame-set without geometry or depth raises ``NavigationError`` saying so."""
+        key = (id(table), None if split in (None, "all") else split)
+        if key not in self._placements:
+            _, scored, arr = self._split(table, split)
+            self._placements[key] = Placements(self.fs, scored, arr, table.frames)
+        return self._placements[key]
+
     def _split(self, table: ScoreTable, split: str | None) -> tuple[ScoreTable, pd.DataFrame, FrameArrays]:
         key = (id(table), None if split in (None, "all") else split)
         if key not in self._scored:  # the table is kept with its entry, so its id is never reused while cached
@@ -113,23 +124,31 @@ class Evaluation:
     per_category: pd.DataFrame
     frames: pd.DataFrame
     arrays: FrameArrays
+    walks: pd.DataFrame | None = None  # per episode, where the agent stopped (``navigation``); None without geometry
 
 
 def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice,
              split: str | None = "val") -> Evaluation:
-    """Metrics (with CIs and localisation) and the per-category table of one split at one sigma."""
+    """Metrics (with CIs and localisation), the navigation estimate where the frame-set has geometry, and the
+    per-category table of one split at one sigma."""
     ctx = EvalContext.of(data)
     scored, arr = ctx.scored(table, split), ctx.arrays(table, split)
     metrics = detection_metrics(arr, sigma.value)
     hits = localisation_hits(ctx.fs, table_subset(table, scored.frame_id), sigma.value)
     metrics.update(localisation_metrics(hits))
+    ci95 = bootstrap_ci(arr, sigma.value, clusters=ctx.clusters, boot=ctx.boot)
+    walks, navigation = None, {"missing": ctx.fs.navigation_missing}
+    if navigation["missing"] is None:
+        walks = episodes_at(ctx.placements(table, split), sigma.value)
+        estimate = navigation_metrics(walks, ctx.clusters, ctx.boot)
+        metrics.update(estimate.pop("metrics"))
+        ci95.update(estimate.pop("ci95"))
+        navigation = {"policy": "first match at sigma (1-of-1)", **estimate}
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   modality=table.meta.get("modality"), frameset_fingerprint=ctx.fs.fingerprint, split=split or "all",
-                  **sigma.as_dict(), metrics=metrics,
-                  ci95=bootstrap_ci(arr, sigma.value, clusters=ctx.clusters, boot=ctx.boot),
-                  n_bootstrap=ctx.boot.n_boot,
+                  **sigma.as_dict(), metrics=metrics, ci95=ci95, navigation=navigation, n_bootstrap=ctx.boot.n_boot,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
-    return Evaluation(result, per_category(arr, sigma.value), scored, arr)
+    return Evaluation(result, per_category(arr, sigma.value), scored, arr, walks)
 
 
 def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:

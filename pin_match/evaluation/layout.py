@@ -46,6 +46,8 @@ class ReportFiles:
     sigma_curves: Path
     score_distributions: Path
     per_category_plot: Path
+    navigation: Path  # each episode's stop (``navigation.episodes_at``); written where the frame-set has geometry
+    navigation_curves: Path
     page: Path
 
     @classmethod
@@ -54,7 +56,8 @@ class ReportFiles:
         return cls(metrics=folder / METRICS, per_category=folder / "per_category.csv", markdown=folder / "metrics.md",
                    latex=folder / "metrics.tex", sigma_curves=folder / "sigma_curves.png",
                    score_distributions=folder / "score_distributions.png",
-                   per_category_plot=folder / "per_category.png", page=folder / REPORT_PAGE)
+                   per_category_plot=folder / "per_category.png", navigation=folder / "navigation.csv",
+                   navigation_curves=folder / "navigation_curves.png", page=folder / REPORT_PAGE)
 
 
 @dataclass(frozen=True)

@@ -57,15 +57,21 @@ def references(assets: html.Assets, target: Target) -> Markup:
 
 
 def cohort_members(assets: html.Assets, cohort: TargetCohort, n: int = 3) -> Markup:
-    """The ``n`` cohort members closest to the target (its scale's impostors), each titled with its raw score;
-    only those whose image is still on this machine (the cohort's folder as scored)."""
-    images = []
+    """The ``n`` cohort members closest to the target (its scale's impostors), each titled with its raw score.
+
+    The images are read from the cohort's folder as it was scored; a member whose image is not
+    there on this machine is named in its place, with the path looked at.
+    """
+    shown = []
     for name, score in cohort.closest[:n]:
         path = Path(cohort.folder) / name
         if path.is_file():
             src = assets.add(("cohort", str(path)), lambda p=path: thumbnail(read_image(p), REFERENCE_SIZE))
-            images.append(html.image(src, f"cohort member {name}, raw score {score:.3f}"))
-    return Markup('<div class="refs">{}</div>').format(html.join(images))
+            shown.append(html.image(src, f"cohort member {name}, raw score {score:.3f}"))
+        else:
+            shown.append(Markup('<span class="note">{}</span>').format(
+                f"cohort member {name}, raw score {score:.3f}: no image at {path} on this machine"))
+    return Markup('<div class="refs">{}</div>').format(html.join(shown))
 
 
 def legend(points: bool = True) -> Markup:

@@ -91,6 +91,20 @@ def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title
     _figure(Path(path), title, draw)
 
 
+def plot_navigation_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
+    """SR, SPL and CE (% of episodes) and the share not found against sigma (``navigation.navigation_sweep``)."""
+
+    def draw(ax) -> None:
+        for key, label in (("sr", "SR"), ("spl", "SPL"), ("ce", "CE"), ("not_found_pct", "not found")):
+            ax.plot(curve["sigma"], curve[key], label=label, linestyle="--" if key == "not_found_pct" else "-",
+                    drawstyle="steps-pre")
+        ax.axvline(sigma, color="k", linewidth=0.8, label=f"sigma = {sigma:g}")
+        ax.set(xlabel="sigma", ylabel="% of episodes", ylim=(-2, 102))
+        ax.legend(fontsize=8)
+
+    _figure(Path(path), title, draw)
+
+
 def plot_score_distributions(scored: Scored, sigma: float, path: str | Path, title: str = "") -> None:
     """Score histograms of frames by what they show (target, same-category, other distractor, nothing)."""
     arr = as_arrays(scored)

@@ -11,59 +11,28 @@ from __future__ import annotations
 
 import datetime as dt
 import math
-import re
-from dataclasses import dataclass, replace
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
 
 from pin_match.data.frameset import FrameSet
-from pin_match.errors import PinMatchError
-from pin_match.evaluation.evaluator import split_frames
-from pin_match.evaluation.metrics import METRIC_KEYS, FrameArrays, frame_arrays, threshold_metrics, to_python
-from pin_match.evaluation.tuning import DEFAULT_MATCH_FLOOR, DEFAULT_OBJECTIVE, choose_sigma
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.metrics import METRIC_KEYS, frame_arrays, threshold_metrics, to_python
+from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy, found_frames
+from pin_match.evaluation.tuning import (
+    DEFAULT_MATCH_FLOOR,
+    DEFAULT_OBJECTIVE,
+    OBJECTIVES,
+    choose_sigma,
+    objective_curve,
+)
 from pin_match.scoring.table import ScoreTable
 
 MAX_CANDIDATES = 2000  # sigmas tried when tuning for a policy: every distinct score, or this many quantiles
 
 
-class PolicyError(PinMatchError, ValueError):
-    """A stop policy that does not make sense."""
-
-
-@dataclass(frozen=True)
-class StopPolicy:
-    """Found when at least ``k`` of the last ``n`` frames (this one included) are at or above sigma."""
-
-    k: int = 1
-    n: int = 1
-
-    def __post_init__(self) -> None:
-        if not 1 <= self.k <= self.n:
-            raise PolicyError(f"stop policy {self.k}-of-{self.n}: need 1 <= k <= n")
-
-    def __str__(self) -> str:
-        return f"{self.k}-of-{self.n}"
-
-    @classmethod
-    def parse(cls, text: str) -> StopPolicy:
-        found = re.fullmatch(r"\s*(\d+)\s*-?of-?\s*(\d+)\s*", text)
-        if not found:
-            raise PolicyError(f"stop policy {text!r}: write it as K-of-N, e.g. 2-of-3")
-        return cls(int(found.group(1)), int(found.group(2)))
-
-
-def found_frames(arr: FrameArrays, sigma: float, policy: StopPolicy) -> np.ndarray:
-    """Per frame (in ``arr``'s order): does the policy fire there? Windows never reach into another episode."""
-    matched = np.r_[0, np.cumsum(arr.score >= sigma)]
-    index = np.arange(len(arr.score))
-    starts = np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(index) else index
-    episode_start = starts[np.searchsorted(starts, index, side="right") - 1] if len(index) else index
-    window_start = np.maximum(index - policy.n + 1, episode_start)
-    return matched[index + 1] - matched[window_start] >= policy.k
-
-
-def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = StopPolicy()) -> dict[str, float]:
+def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
     """PIN's counts and metrics with "matched" read as "the policy fires", plus frames to the first firing.
 
     ``frames_to_first_match``: the mean, over episodes where the policy fires, of the 1-based
@@ -93,9 +62,12 @@ def policy_sweep(scored: pd.DataFrame, policy: StopPolicy) -> pd.DataFrame:
 
 def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: str = DEFAULT_OBJECTIVE,
                 split: str = "train", match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
-    """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics."""
-    scored = split_frames(table, fs, split)
-    curve = policy_sweep(scored, policy)
+    """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics (for a
+    navigation objective, of the navigation estimate under the policy)."""
+    ctx = EvalContext.of(fs)
+    scored = ctx.scored(table, split)
+    navigation = objective in OBJECTIVES and OBJECTIVES[objective].navigation
+    curve = objective_curve(ctx, table, split, objective, policy) if navigation else policy_sweep(scored, policy)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
     return dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),

@@ -16,7 +16,13 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.evaluator import EvalContext, evaluate
 from pin_match.evaluation.layout import ReportFiles
-from pin_match.evaluation.plots import plot_per_category, plot_score_distributions, plot_sigma_curves
+from pin_match.evaluation.navigation import navigation_sweep, sweep_sigmas
+from pin_match.evaluation.plots import (
+    plot_navigation_curves,
+    plot_per_category,
+    plot_score_distributions,
+    plot_sigma_curves,
+)
 from pin_match.evaluation.report_page import write_report_page
 from pin_match.evaluation.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.sweep import sweep
@@ -32,7 +38,8 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     ``data``: the frame-set, or the run's ``EvalContext`` (its labels and bootstrap options).
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
     or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
-    ``files``: each file written, by its name in ``ReportFiles`` (``{"metrics": ".../metrics.json", ...}``).
+    ``files``: each file written, by its name in ``ReportFiles`` (``{"metrics": ".../metrics.json", ...}``; the
+    navigation files only where the frame-set has geometry).
     """
     ctx = EvalContext.of(data)
     choice = sigma if isinstance(sigma, SigmaChoice) else \
@@ -50,7 +57,14 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     plot_sigma_curves(sweep(evaluation.arrays), choice.value, files.sigma_curves, title)
     plot_score_distributions(evaluation.arrays, choice.value, files.score_distributions, title)
     plot_per_category(evaluation.per_category, files.per_category_plot, title)
+    for stale in (files.navigation, files.navigation_curves):
+        stale.unlink(missing_ok=True)
+    if evaluation.walks is not None:
+        atomic.write_text(files.navigation, evaluation.walks.to_csv(index=False))
+        curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score))
+        plot_navigation_curves(curve, choice.value, files.navigation_curves, title)
     write_report_page(files, table, ctx.fs, evaluation)
     # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)
     atomic.write_json(files.metrics, result)
-    return {**result, "files": {name: str(path) for name, path in dataclasses.asdict(files).items()}}
+    written = {name: str(path) for name, path in dataclasses.asdict(files).items() if path.exists()}
+    return {**result, "files": written}

@@ -100,6 +100,48 @@ def scale_html(fs: FrameSet, cohorts: dict[str, TargetCohort], evaluation: Evalu
             html.table(rows), html.gallery(figures)]
 
 
+def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sigma: float,
+                    assets: html.Assets) -> list[Markup]:
+    """What the agent would do at this sigma: the estimate's numbers, then each episode's stop drawn (the frame the
+    goal was placed from, its points) with what it landed on and how far from the target; or why it is absent."""
+    parts = [html.heading("What the agent would do (navigation estimate)", 2, "navigation")]
+    walks, nav = evaluation.walks, evaluation.result["navigation"]
+    if walks is None:
+        return [*parts, html.paragraph(f"Not estimated: {nav['missing']}.", "note")]
+    m, ci = evaluation.result["metrics"], evaluation.result["ci95"]
+    lines = [f"{name} {_value(m.get(key))}{_interval(ci.get(key))}" for key, name in NAVIGATION_NAMES]
+    parts += [html.paragraph("The recorded walk is followed until the policy (" + nav["policy"] + ") fires on a frame "
+                             "whose matched points have depth in PIN's 0.5-5 m; the agent then walks to their median "
+                             "point and stops. Exploration after a missed target is not simulated (docs/metrics.md, "
+                             "'Navigation').", "note"),
+              html.paragraph("; ".join(lines) + f" over {nav['n_episodes']} episodes: " +
+                             ", ".join(f"{n} {o}" for o, n in nav["outcomes"].items()) + ".")]
+    figures = []
+    for _, w in walks.iterrows():
+        caption = [f"episode {w.episode_id}: {w.outcome}", f"target {w.target_object_id}"]
+        if w.outcome == "not found":
+            figures.append(html.figure([], [*caption, f"never stopped; walk's end {w.d2g:.2f} m from the target",
+                                            f"{w.unplaced_firings} firings without depth in range"], "miss"))
+            continue
+        image = frame_image(assets, fs, w.point_frame_id, frame_points(table, w.point_frame_id, sigma))
+        caption += [f"stop at step {w.stop_step}, goal from frame {w.point_frame_id}",
+                    f"point on: {w.landed_on}, {w.d2g:.2f} m from the target", f"{w.steps} steps, SPL {w.spl:.2f}"]
+        figures.append(html.figure([image], caption, "hit" if w.outcome == "success" else "miss"))
+    return [*parts, html.gallery(figures)]
+
+
+NAVIGATION_NAMES = (("sr", "SR %"), ("spl", "SPL %"), ("ce", "CE %"), ("d2g", "D2G m"), ("steps", "Steps"),
+                    ("not_found_pct", "not found %"), ("unplaced_pct", "a firing without depth %"))
+
+
+def _value(v: float | None) -> str:
+    return "n/a" if v is None else f"{v:.2f}"
+
+
+def _interval(ci: list[float] | None) -> str:
+    return f" (95 % CI {ci[0]:.2f}-{ci[1]:.2f})" if ci else ""
+
+
 def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evaluation: Evaluation,
                       cap: int = DEFAULT_CAP) -> Path:
     """Write ``files.page`` (and ``report_files/`` beside it) into a report folder whose plots are already written."""
@@ -108,11 +150,13 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
     overall, per_category = report_tables(result, evaluation.per_category)
     assets = html.Assets(files.page, ASSETS)
     plots = ((files.sigma_curves, "metrics against sigma"), (files.score_distributions, "score distributions per role"),
-             (files.per_category_plot, "metrics per target category"))
+             (files.per_category_plot, "metrics per target category"),
+             (files.navigation_curves, "navigation estimate against sigma"))
     parts = [header(table, fs, result), html.heading("PIN detection metrics"),
              html.table(overall, f"split {result['split']}, sigma {sigma:g} ({result['sigma_source']})"),
              html.heading("Per target category"), html.table(per_category), html.heading("Plots"),
              html.gallery([html.image(plot.name, alt, 440) for plot, alt in plots if plot.exists()]), page_legend()]
+    parts += navigation_html(fs, table, evaluation, sigma, assets)
     cohorts = target_cohorts(table)
     parts += scale_html(fs, cohorts, evaluation, sigma, assets)
     for section in sections(evaluation.frames, sigma, cap):

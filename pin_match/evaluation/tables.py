@@ -20,7 +20,12 @@ import pandas as pd
 TABLE_COLUMNS = [("match_pct", "%Match", 2), ("tm_pct", "TM", 2), ("cm_pct", "CM", 2), ("nm_pct", "NM", 2),
                  ("gm_pct", "GM", 2), ("om_pct", "OM", 2), ("target_recall", "Recall", 2),
                  ("auroc_target", "AUROC", 3), ("auroc_same", "AUROC-same", 3), ("first_match_precision", "FM-prec", 2)]
+# the navigation estimate (``navigation``) in the paper's order, before the detection columns as in its Table 2,
+# then the share of episodes where the agent never stopped; only where the frame-set has geometry
+NAVIGATION_COLUMNS = [("sr", "SR", 2), ("spl", "SPL", 2), ("ce", "CE", 2), ("d2g", "D2G", 2), ("steps", "Steps", 1),
+                      ("not_found_pct", "Not found", 2)]
 CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
+ALL_COLUMNS = [*NAVIGATION_COLUMNS, *CATEGORY_COLUMNS]
 SIGMA_FROM = "sigma from"
 
 
@@ -46,11 +51,13 @@ def tuning_row(result: dict) -> Row:
 
 
 def side_by_side(rows: Sequence[Row]) -> pd.DataFrame:
-    """The paper's table: one row per matcher (sigma, where it came from, then the metrics), NaN = undefined."""
+    """The paper's table: one row per matcher (sigma, where it came from, then the metrics), NaN = undefined; the
+    navigation columns first where any row has them (a frame-set with geometry)."""
+    columns = [*NAVIGATION_COLUMNS, *TABLE_COLUMNS] if any("sr" in r.metrics for r in rows) else TABLE_COLUMNS
     data = {}
     for r in rows:
         data[r.name] = {"sigma": r.sigma, SIGMA_FROM: r.sigma_source,
-                        **{header: _nan(r.metrics.get(key)) for key, header, _ in TABLE_COLUMNS}}
+                        **{header: _nan(r.metrics.get(key)) for key, header, _ in columns}}
     return pd.DataFrame.from_dict(data, orient="index").rename_axis("Matcher")
 
 
@@ -58,7 +65,9 @@ def sigma_caption(rows: Sequence[Row], split: str) -> str:
     """A caption that says which sigma every row is at: one phrase when they share a source."""
     sources = sorted({r.sigma_source for r in rows})
     said = f"sigma {sources[0]}" if len(sources) == 1 else "sigma per row, source in the 'sigma from' column"
-    return f"Detection on the {split} split; {said}."
+    what = "Navigation (SR to Not found: estimated from the recorded walks, docs/metrics.md) and detection" \
+        if any("sr" in r.metrics for r in rows) else "Detection"
+    return f"{what} on the {split} split; {said}."
 
 
 def category_table(categories: pd.DataFrame) -> pd.DataFrame:
@@ -76,7 +85,7 @@ def _nan(value: float | None) -> float:
 
 
 def _decimals(header: str) -> int | None:
-    return next((d for _, h, d in CATEGORY_COLUMNS if h == header), None)
+    return next((d for _, h, d in ALL_COLUMNS if h == header), None)
 
 
 def format_value(value: object, decimals: int | None) -> str:

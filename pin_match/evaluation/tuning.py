@@ -22,6 +22,8 @@ from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.evaluator import EvalContext
 from pin_match.evaluation.metrics import Scored, detection_metrics
+from pin_match.evaluation.navigation import episodes_at, metrics_of, navigation_sweep, sweep_sigmas
+from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy
 from pin_match.evaluation.sweep import sweep
 from pin_match.scoring.table import ScoreTable
 
@@ -40,6 +42,7 @@ class Objective:
 
     description: str
     score: Callable[[pd.DataFrame, float], np.ndarray]  # (sweep table, %Match floor) -> values
+    navigation: bool = False  # reads the navigation curve (``navigation.navigation_sweep``), not the detection one
 
 
 OBJECTIVES: dict[str, Objective] = {
@@ -56,6 +59,10 @@ OBJECTIVES: dict[str, Objective] = {
     "tm-at-match": Objective(
         "highest TM % among the sigmas that keep %Match at or above a floor (default 50 %)",
         lambda s, floor: np.where(s["match_pct"].to_numpy() >= floor, s["tm_pct"].to_numpy(), np.nan)),
+    "sr": Objective(
+        "PIN's success rate as estimated from the recorded walks (docs/metrics.md, 'Navigation'), ties to the "
+        "higher SPL's sigma; needs a frame-set with geometry; candidates: every distinct score, or 200 quantiles",
+        lambda s, floor: (s["sr"] + 1e-6 * s["spl"]).to_numpy(), navigation=True),
 }
 
 
@@ -85,19 +92,35 @@ def tune(table: ScoreTable, data: FrameSet | EvalContext, objective: str = DEFAU
     The table must have been scored on the frame-set (``data``, or the run's ``EvalContext``); a
     split it lacks is an error that says how to go on (another split, an explicit sigma or the paper's).
     """
-    scored = EvalContext.of(data).arrays(table, split)
-    curve = sweep(scored)
+    ctx = EvalContext.of(data)
+    scored = ctx.arrays(table, split)
+    curve = objective_curve(ctx, table, split, objective)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
+    metrics = detection_metrics(scored, sigma)
+    if ctx.fs.navigation_missing is None:
+        metrics.update(metrics_of(episodes_at(ctx.placements(table, split), sigma)))
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   sigma=sigma, objective=objective, objective_value=value, split=split,
                   frameset_fingerprint=table.meta.get("frameset_fingerprint"),
-                  n_frames=len(scored.score), n_candidates=len(curve),
-                  metrics_at_sigma=detection_metrics(scored, sigma),
+                  n_frames=len(scored.score), n_candidates=len(curve), metrics_at_sigma=metrics,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
     if objective == "tm-at-match":
         result["match_floor"] = match_floor
     return result
+
+
+def objective_curve(ctx: EvalContext, table: ScoreTable, split: str, objective: str,
+                    policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
+    """The candidate sigmas and what ``objective`` reads at each: the detection sweep, or for a navigation objective
+    the navigation curve (a frame-set without geometry says why it has none)."""
+    if objective in OBJECTIVES and OBJECTIVES[objective].navigation:
+        reason = ctx.fs.navigation_missing
+        if reason is not None:
+            raise TuningError(f"objective {objective!r} needs the navigation estimate: {reason}")
+        places = ctx.placements(table, split)
+        return navigation_sweep(places, sweep_sigmas(places.arrays.score), policy)
+    return sweep(ctx.arrays(table, split))
 
 
 def default_threshold_path(matcher: str, root: str | Path = THRESHOLDS_DIR) -> Path:

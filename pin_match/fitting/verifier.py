@@ -30,7 +30,8 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.carry import pooled
-from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes, frame_labels
+from pin_match.evaluation.evaluator import EvalContext
+from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import (
     DEFAULT_SIGNALS,
@@ -166,19 +167,20 @@ def fit_weights(used: pd.DataFrame, weights: np.ndarray, signals: Sequence[str],
                 gate=dict(floor=floor, coef=float(beta[-1]) if floor else 0.0))
 
 
-def fit_verifier(framesets: Sequence[FrameSet | str | Path], path: str | Path, *, split: str = "train",
+def fit_verifier(framesets: Sequence[FrameSet | str | Path | EvalContext], path: str | Path, *, split: str = "train",
                  overrides: dict[str, Any] | None = None, out: str | Path = outputs.FEATURES, l2: float = 1.0,
                  run: RunOptions = DEFAULT_RUN) -> dict[str, Any]:
     """Fit the signals' weights on ``split`` of every frame-set together and write the verifier file (atomically).
 
     ``overrides`` configure the ``verify`` matcher (``signals`` leaves some out, for an ablation);
     the file records its ``signals_id``, so the matcher refuses it for other signals. The numbers
-    are ``fit_weights``': the colour weight and the colour penalty's slope are never negative.
+    are ``fit_weights``': the colour weight and the colour penalty's slope are never negative. A
+    frame-set given as an ``EvalContext`` lends its labels, built once for the whole run.
     """
     matcher = create_matcher("verify", **(overrides or {}))
-    sets = [item if isinstance(item, FrameSet) else FrameSet.load(item) for item in framesets]
-    tables = [candidate_table(fs, matcher, split=split, out=out, run=run) for fs in sets]
-    spec = fit_spec(matcher, [(fs, frame_labels(fs), table) for fs, table in zip(sets, tables)], split, l2)
+    contexts = [EvalContext.of(item) for item in framesets]
+    tables = [candidate_table(ctx.fs, matcher, split=split, out=out, run=run) for ctx in contexts]
+    spec = fit_spec(matcher, [(ctx.fs, ctx.labels, table) for ctx, table in zip(contexts, tables)], split, l2)
     atomic.write_json(path, spec)
     read_verifier(Path(path))  # what was written is what the matcher accepts
     return spec

@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.importer import LABELS, TARGET_ID
+from pin_match.data.importer import LABELS, PIN_CAMERA_HEIGHT, PIN_HFOV_DEG, POSES, TARGET_ID
 from pin_match.errors import PinMatchError
 from pin_match.pin_agent.episode import episode_record, labels_in_episode
 
@@ -42,17 +42,21 @@ class FrameRecorder:
 
     Per episode: ``start_episode(env.habitat_env.current_episode)``, ``record(observations)`` after
     every step, ``finish_episode()``; or ``with recorder.episode(ep): ...``. ``split`` ("train" or
-    "val") is written into each episode; without it ``pin-match import --split`` decides.
+    "val") is written into each episode; without it ``pin-match import --split`` decides. ``hfov_deg`` and
+    ``camera_height`` are the RGB camera's (PIN's: 42 degrees, 1.31 m), written beside each episode's poses.
     """
 
-    def __init__(self, root: str | Path, *, split: str | None = None) -> None:
+    def __init__(self, root: str | Path, *, split: str | None = None, hfov_deg: float = PIN_HFOV_DEG,
+                 camera_height: float = PIN_CAMERA_HEIGHT) -> None:
         self.root = atomic.ensure_dir(root)
         self.split = split
+        self.camera = {"hfov_deg": float(hfov_deg), "camera_height": float(camera_height)}
         self._record: dict[str, Any] | None = None
         self._labels: set[int] = set()
         self._staging: Path | None = None
         self._steps = 0
         self._size: tuple[int, int] | None = None
+        self._poses: list[list[float]] = []
         self._this_run: set[str] = set()
 
     # ------------------------------------------------------------------ episodes
@@ -88,6 +92,7 @@ class FrameRecorder:
                                  "names episode folders by id, so a recording holds each id once")
         self._this_run.add(episode_id)
         self._record, self._labels, self._steps, self._size = record, labels_in_episode(record), 0, None
+        self._poses = []
         if done is None:
             self._clear_leftovers(episode_id)
             try:
@@ -96,14 +101,18 @@ class FrameRecorder:
                 raise atomic.OutputError(f"cannot write into {self.root}: {exc.strerror or exc}") from exc
         return done is None
 
-    def record(self, observations: Mapping[str, Any]) -> None:
-        """Store one step: ``rgb`` (H x W x 3 uint8), ``semantic`` (PIN labels), optional ``depth`` (metres)."""
+    def record(self, observations: Mapping[str, Any], *, camera_pitch: float = 0.0) -> None:
+        """Store one step: ``rgb`` (H x W x 3 uint8), ``semantic`` (PIN labels), optional ``depth`` (metres), and
+        where the agent stood: PIN's ``gps`` ([forward, right] metres from the start) and ``compass`` (radians, turned
+        left positive), with ``camera_pitch`` (radians up, the agent's tilt, 0 = level); every step of an episode
+        or none."""
         if self._record is None:
             raise RecordingError("record() before start_episode(): open the episode first")
         if self._staging is None:
             return  # finished in an earlier run
         where = f"episode {self._record['episode_id']!r}, step {self._steps}"
         rgb, semantic, depth = self._check_step(observations, where)
+        self._check_pose(observations, camera_pitch, where)
         step = self._steps
         atomic.write_image(self._staging / "rgb" / f"{step}.png", rgb)
         _write_npy(self._staging / "semantic" / f"{step}.npy", semantic)
@@ -121,6 +130,8 @@ class FrameRecorder:
             if not self._steps:
                 self.abort_episode()
                 raise RecordingError(f"episode {record['episode_id']!r} has no recorded step: nothing to publish")
+            if self._poses:
+                atomic.write_json(staging / POSES, {**self.camera, "gps_compass_pitch": self._poses})
             try:
                 staging.rename(folder)
             except OSError as exc:
@@ -188,6 +199,22 @@ class FrameRecorder:
                 raise RecordingError(f"{where}: depth must be finite metres >= 0")
             depth[np.isin(depth, DEPTH_REPLACEMENT_VALUES)] = 0.0
         return rgb, semantic.astype(np.int32), depth
+
+    def _check_pose(self, obs: Mapping[str, Any], pitch: float, where: str) -> None:
+        has = "gps" in obs and "compass" in obs
+        if has != bool(self._poses) and self._steps:
+            raise RecordingError(f"{where}: " + ("gps and compass appear after steps without them" if has else
+                                                 "no gps or compass, which earlier steps had") +
+                                 ": an episode's steps all carry the agent's pose or none does")
+        if not has:
+            return
+        gps = np.asarray(obs["gps"], np.float64).reshape(-1)
+        compass = np.asarray(obs["compass"], np.float64).reshape(-1)
+        values = [*gps.tolist(), *compass.tolist(), float(pitch)]
+        if gps.size != 2 or compass.size != 1 or not np.isfinite(values).all():
+            raise RecordingError(f"{where}: gps must be 2 finite numbers and compass 1 (PIN's sensors), got gps "
+                                 f"{gps.tolist()} compass {compass.tolist()} pitch {pitch!r}")
+        self._poses.append(values)
 
     def _check_labels(self, semantic: np.ndarray, where: str) -> None:
         """Ids from 100000 up are PIN's injected objects (the scene's own ids lie below): only its three exist."""

@@ -52,7 +52,10 @@ def score_to_file(frameset: FrameSet | str | Path, matcher: Matcher | str, *, ov
 
     ``overrides`` configure a matcher given by name (weights included: ``registry.with_weights``).
     ``shard`` ("K/N") scores one part of the episodes. With ``run.client`` (a ``distributed.Client``)
-    the episodes are scored on its cluster, into the same cache and the same table bytes.
+    the episodes are scored on its cluster, into the same cache and the same table: the same bytes for
+    matchers whose arithmetic does not depend on the thread count (``color`` and ``sift`` are tested
+    so); a network's float sums may differ in the last bits with a worker's threads (the test allows
+    ``rtol=1e-4``, ``atol=1e-5`` on ``verify``'s candidate signals).
     """
     if isinstance(matcher, str):
         matcher = create_matcher(matcher, **(overrides or {}))

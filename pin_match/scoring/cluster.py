@@ -8,7 +8,10 @@ episodes whose chunks it already wrote. Before the first task, a worker plugin
 tasks find them ready (``_Matchers``); each task writes every episode's chunk file
 atomically into the shared cache, exactly as the local path does, and the client
 assembles the final table with the local code. So a cluster run and a local run resume
-each other, and the table is the same bytes.
+each other, and the table is the local one: byte for byte where a matcher's arithmetic does not
+depend on the thread count (``color``, ``sift``: tests/test_distributed.py compares the files),
+within the last bits of a float where a network's sums do (a worker runs ``torch_threads``
+threads; the test allows ``rtol=1e-4``, ``atol=1e-5`` on ``verify``'s candidate signals).
 
 Workers must see the frame-set and the cache at the same absolute paths as the client (a
 shared file system) and have the same pin_match, matchers and weights installed; a worker

@@ -11,6 +11,7 @@ import pandas as pd
 import torch
 
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.evaluator import EvalContext
 from pin_match.evaluation.metrics import auroc
 from pin_match.nn.head import prototypes
 from pin_match.nn.prototypes import patch_scores
@@ -96,13 +97,18 @@ def validation_auroc(scored: pd.DataFrame) -> float:
                  scored.score[~scored.target_visible & scored.same_visible].to_numpy())
 
 
-def scored_from_store(fs: FrameSet, store: FeatureStore, head: torch.nn.Module | None, name: str) -> pd.DataFrame:
-    """Frame labels with the store-based score of every stored frame (the metrics' input), as scoring would give."""
-    from pin_match.evaluation.labels import frame_labels, scored_frames
+def scored_from_store(data: FrameSet | EvalContext, store: FeatureStore, head: torch.nn.Module | None,
+                      name: str) -> pd.DataFrame:
+    """Frame labels with the store-based score of every stored frame (the metrics' input), as scoring would give.
+
+    ``data``'s labels are those of an ``EvalContext`` (built once however many scores are read against them).
+    """
     from pin_match.scoring.table import ScoreTable
 
-    scores = store_frame_scores(store, fs, head)
-    return scored_frames(frame_labels(fs), ScoreTable(scores, dict(matcher=name, matcher_id=name)))
+    ctx = EvalContext.of(data)
+    scores = store_frame_scores(store, ctx.fs, head)
+    return ctx.scored(ScoreTable(scores, dict(matcher=name, matcher_id=name,
+                                              frameset_fingerprint=ctx.fs.fingerprint)), None)
 
 
 def sigma_on_split(scored: pd.DataFrame, objective: str = "first-match", split: str = "train") -> float:
@@ -125,9 +131,10 @@ def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module
     """
     from pin_match.evaluation.metrics import detection_metrics, per_category
 
+    ctx = EvalContext(fs)  # the labels once for both matchers
     out: dict[str, dict] = {}
     for name, h in (("frozen", None), ("learned", head)):
-        scored = scored_from_store(fs, store, h, name)
+        scored = scored_from_store(ctx, store, h, name)
         scored = scored[scored.split == split].reset_index(drop=True)
         if scored.empty:
             raise TrainingError(f"feature store {store.root} holds no frame of split {split!r}")

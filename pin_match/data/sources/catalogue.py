@@ -128,17 +128,14 @@ def _entry_points() -> dict[str, EntryPoint]:
 
 def _load(ep: EntryPoint) -> None:
     """Register the ``DataSource`` an entry point names, or say what is wrong with the entry point."""
-    where = f"entry point {ep.name!r} ({ep.value}, group {ENTRY_POINT_GROUP})"
-    try:
-        source = ep.load()
-    except Exception as exc:  # whatever importing a third party's module raises, it is that package's fault
-        raise DataSourceError(f"data source {where} cannot be loaded: {type(exc).__name__}: {exc}") from exc
+    where = f"data source {discovery.described(ep)}"
+    source = discovery.load(ep, DataSourceError, "data source")
     if not isinstance(source, DataSource):
-        raise DataSourceError(f"data source {where} names a {type(source).__name__}, not a DataSource")
+        raise DataSourceError(f"{where} names a {type(source).__name__}, not a DataSource")
     if source.name != ep.name:
-        raise DataSourceError(f"data source {where} names the source {source.name!r}; the entry point's name must "
+        raise DataSourceError(f"{where} names the source {source.name!r}; the entry point's name must "
                               f"be the source's")
     try:
         register(source)
     except DataSourceError as exc:
-        raise DataSourceError(f"data source {where}: {exc}; give it another name") from None
+        raise DataSourceError(f"{where}: {exc}; give it another name") from None

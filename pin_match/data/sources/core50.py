@@ -13,12 +13,13 @@ from __future__ import annotations
 from pathlib import Path
 
 from pin_match import atomic
+from pin_match.data.csv_rows import write_rows
 from pin_match.data.frameset import FrameSet
 from pin_match.data.images import read_image
 from pin_match.data.mask_check import checked_mask
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_OPTIONAL, DataSource, register
-from pin_match.data.sources.photo_folder import ROOM_COLUMNS, LookalikeError, write_csv
+from pin_match.data.sources.photo_folder import ROOM_COLUMNS, LookalikeError
 from pin_match.data.sources.prepare import add_photo, checkout_commit, object_mask, write_source_folder
 
 # CORe50 (Lomonaco & Maltoni, CoRL 2017): objects 1-50, five instances per category in this order
@@ -83,48 +84,55 @@ def prepare_core50(core50_repo: str | Path, rooms_repo: str | Path, out: str | P
     if missing:
         raise LookalikeError(f"room photos missing: {missing}")
     photos_from, rooms_from = _at_commit(CORE50_SOURCE, core50_repo), _at_commit(TUM_SOURCE, rooms_repo)
+    return write_source_folder(out, lambda stage: _write_photos(stage, sources, core50_repo, photos_from),
+                               lambda rows, room_rows: _notice(len(rows), len(room_rows), photos_from, rooms_from),
+                               write_rest=lambda stage: _write_rooms(stage, rooms, rooms_repo, rooms_from),
+                               overwrite=overwrite)
 
-    def write_photos(stage: Path) -> list[dict[str, str]]:
-        rows = []
-        for src in sources:
-            _, session, obj, frame = src.stem.split("_")
-            o = int(obj)
-            photo_id = f"core50_s{int(session):02d}_o{o:02d}_{frame}"
-            rgb = read_image(src)
-            kept, _ = checked_mask(rgb, object_mask(rgb))
-            if kept is None or photo_id in CORE50_BAD_MASKS:
-                continue
-            file, mask = add_photo(stage, photo_id, src.read_bytes(), src.suffix, kept)
-            rows.append(dict(photo_id=photo_id, instance_id=f"core50_o{o:02d}",
-                             category=CORE50_CATEGORIES[(o - 1) // 5], file=file, mask=mask, source=photos_from,
-                             source_path=str(src.relative_to(core50_repo)), licence=CORE50_LICENCE))
-        return rows
 
-    def write_rooms(stage: Path) -> list[dict[str, str]]:
-        rows = []
-        for k, src in enumerate(rooms, start=1):
-            file = f"rooms/tum_fr3_office_{k:02d}.png"
-            atomic.write_bytes(stage / file, src.read_bytes())
-            rows.append(dict(room_id=f"tum_fr3_office_{k:02d}", file=file, source=rooms_from,
-                             source_path=str(src.relative_to(rooms_repo)), licence=TUM_LICENCE))
-        write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
-        return rows
+def _write_photos(stage: Path, sources: list[Path], core50_repo: Path, photos_from: str) -> list[dict[str, str]]:
+    """Each CORe50 photo whose mask passes, with its mask, into the stage; their photos.csv rows."""
+    rows = []
+    for src in sources:
+        _, session, obj, frame = src.stem.split("_")
+        o = int(obj)
+        photo_id = f"core50_s{int(session):02d}_o{o:02d}_{frame}"
+        rgb = read_image(src)
+        kept, _ = checked_mask(rgb, object_mask(rgb))
+        if kept is None or photo_id in CORE50_BAD_MASKS:
+            continue
+        file, mask = add_photo(stage, photo_id, src.read_bytes(), src.suffix, kept)
+        rows.append(dict(photo_id=photo_id, instance_id=f"core50_o{o:02d}",
+                         category=CORE50_CATEGORIES[(o - 1) // 5], file=file, mask=mask, source=photos_from,
+                         source_path=str(src.relative_to(core50_repo)), licence=CORE50_LICENCE))
+    return rows
 
-    def describe(rows: list[dict[str, str]], room_rows: list[dict[str, str]]) -> str:
-        return f"""# Sources and licences of these photos
 
-- `photos/` ({len(rows)} photos) and the masks made from them (`masks/`, OpenCV GrabCut seeded from the
+def _write_rooms(stage: Path, rooms: list[Path], rooms_repo: Path, rooms_from: str) -> list[dict[str, str]]:
+    """The TUM room photos and their rooms.csv, into the stage; their rows."""
+    rows = []
+    for k, src in enumerate(rooms, start=1):
+        file = f"rooms/tum_fr3_office_{k:02d}.png"
+        atomic.write_bytes(stage / file, src.read_bytes())
+        rows.append(dict(room_id=f"tum_fr3_office_{k:02d}", file=file, source=rooms_from,
+                         source_path=str(src.relative_to(rooms_repo)), licence=TUM_LICENCE))
+    write_rows(stage / "rooms.csv", ROOM_COLUMNS, rows)
+    return rows
+
+
+def _notice(n_photos: int, n_rooms: int, photos_from: str, rooms_from: str) -> str:
+    return f"""# Sources and licences of these photos
+
+- `photos/` ({n_photos} photos) and the masks made from them (`masks/`, OpenCV GrabCut seeded from the
   border, `pin_match.data.sources.prepare.object_mask`): **CORe50**, V. Lomonaco and D. Maltoni, "CORe50: a
   New Dataset and Benchmark for Continuous Object Recognition", CoRL 2017, https://vlomonaco.github.io/core50/.
   Licence: **CC BY 4.0** (the licence file of github.com/vlomonaco/core50). Taken from {photos_from}
   (`images/C_<session>_<object>_<frame>.png`); each photo's original path is in `photos.csv`. Changes: file
   names, masks added.
-- `rooms/` ({len(room_rows)} photos): **TUM RGB-D benchmark**, J. Sturm et al., "A Benchmark for the Evaluation
+- `rooms/` ({n_rooms} photos): **TUM RGB-D benchmark**, J. Sturm et al., "A Benchmark for the Evaluation
   of RGB-D SLAM Systems", IROS 2012, sequence `fr3/long_office_household`. Licence: **CC BY 4.0**. Taken from
   {rooms_from} (`ch11/data/1..10.png`).
 """
-
-    return write_source_folder(out, write_photos, describe, write_rooms=write_rooms, overwrite=overwrite)
 
 
 def _at_commit(repo: str, checkout: Path) -> str:

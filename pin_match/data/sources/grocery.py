@@ -28,7 +28,6 @@ kinds, four peppers differing in colour alone), not single objects a user could 
 
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -36,6 +35,7 @@ import cv2
 import numpy as np
 
 from pin_match.data.compose import largest_piece
+from pin_match.data.csv_rows import read_rows
 from pin_match.data.images import read_image
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
@@ -91,12 +91,8 @@ def read_products(repo: str | Path) -> list[Product]:
     classes = repo / CLASSES_CSV
     if not classes.is_file():
         raise LookalikeError(f"{repo} is not a Grocery Store Dataset checkout: {classes} is missing")
-    with classes.open(newline="", encoding="utf-8") as f:
-        rows = list(csv.DictReader(f))
-    if not rows or any(c not in rows[0] for c in CLASS_COLUMNS):
-        raise LookalikeError(f"{classes} needs a header with {list(CLASS_COLUMNS)} and at least one row")
     products = []
-    for r in rows:
+    for r in read_rows(classes, CLASS_COLUMNS, LookalikeError):
         iconic = Path("dataset", r["Iconic Image Path (str)"].lstrip("/"))
         folder = Path(*iconic.parent.parts[2:])  # e.g. Packages/Juice/Bravo-Apple-Juice
         if folder.parts[:1] != (PRODUCT_GROUP,):

@@ -5,12 +5,17 @@ look-alikes: the same box with another print, the same pot in another colour, a 
 porcelain in different shapes. 400 of them sit in the public repository vikashplus/object_sim at
 commit ``f84875d`` (folder ``google_objects/``, removed from the repository's head later). ``pin-match
 data prepare gso CHECKOUT --out SRC`` reads them from a checkout or a bare mirror of that
-repository, at that commit, and writes a scan folder (``pin_match.data.synth.scans.ScanFolder``):
-every scan as a compact mesh and its texture, ``scans.csv`` with each scan's source and licence,
-the look-alike families shipped with pin_match (``families.csv``, edit it to draw others) and a
-NOTICE.md that attributes every scan. ``pin-match data build gso OUT --src SRC`` renders the
-synthetic generator's walks with those families; the default set (``pin-match synth``) uses the
-scans shipped inside pin_match, written by the same function (docs/synthetic.md).
+repository, at that commit, or from a copy without ``.git`` (GitHub's archive of that commit: its
+commit cannot be checked, and scans.csv and NOTICE.md say so), and writes a scan folder
+(``pin_match.data.synth.scans.ScanFolder``) through ``prepare.write_source_folder``: every scan as
+a compact mesh and its texture, ``scans.csv`` with each scan's source and licence, the look-alike
+families shipped with pin_match (``families.csv``, edit it to draw others) and a NOTICE.md that
+attributes every scan.
+
+This is the catalogue's one door to the synthetic generator (``pin_match.data.synth``):
+``pin-match data build gso OUT`` renders the default set from the 96 scans shipped inside
+pin_match (written by the same function), ``--src SRC`` a prepared folder's families instead.
+``pin-match synth`` is the same generator with its sizes as options (docs/synthetic.md).
 """
 
 from __future__ import annotations
@@ -21,9 +26,9 @@ from pathlib import Path
 
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
-from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
-from pin_match.data.sources.photo_folder import LookalikeError, write_csv
-from pin_match.data.sources.prepare import checkout_commit, staged_source
+from pin_match.data.sources.catalogue import SRC_OPTIONAL, DataSource, register
+from pin_match.data.sources.photo_folder import LookalikeError
+from pin_match.data.sources.prepare import IndexTable, checkout_commit, write_source_folder
 from pin_match.data.synth.scans import PACKAGED_SCANS, SCAN_COLUMNS, ScanError, read_obj, standing, write_scan
 
 GSO_REPO = "github:vikashplus/object_sim"
@@ -37,10 +42,18 @@ GSO_CITATION = ("L. Downs, A. Francis, N. Koenig, B. Kinman, R. Hickman, K. Reym
 
 @dataclass(frozen=True)
 class ScanTree:
-    """The repository's files at ``GSO_COMMIT``: a work tree checked out there, or a git directory read with git."""
+    """The repository's files at ``GSO_COMMIT``: a work tree checked out there (or a copy of one without ``.git``,
+    unchecked), or a git directory read with git."""
 
     root: Path
     git_dir: Path | None  # None: read the work tree's files
+    checked: bool = True  # False: a copy without .git, taken to be at GSO_COMMIT with nothing to check it against
+
+    def source(self, where: str) -> str:
+        """What scans.csv records as the source of the scan in folder ``where``."""
+        if self.checked:
+            return f"{GSO_REPO}@{GSO_COMMIT[:7]}:{where}"
+        return f"{GSO_REPO}:{where} (a copy without .git, taken to be commit {GSO_COMMIT[:7]}, unchecked)"
 
     def read(self, path: str) -> bytes:
         if self.git_dir is None:
@@ -70,12 +83,11 @@ def open_scan_tree(root: str | Path) -> ScanTree:
     """``root`` as the repository at ``GSO_COMMIT``: a checkout of that commit, or any clone or mirror holding it."""
     root = Path(root)
     if (root / GSO_FOLDER).is_dir():
-        # only a checkout's own .git: git -C on a plain copy would report the commit of a repository around it
-        commit = checkout_commit(root) if (root / ".git").exists() else None
+        commit = checkout_commit(root)  # None: a copy without .git
         if commit is not None and commit != GSO_COMMIT:
             raise LookalikeError(f"{root} is checked out at {commit[:7]}, not {GSO_COMMIT[:7]}: run "
                                  f"`git -C {root} checkout {GSO_COMMIT[:7]}` (the scans left the repository later)")
-        tree = ScanTree(root, None)
+        tree = ScanTree(root, None, checked=commit is not None)
     else:
         git_dir = next((d for d in (root / ".git", root) if (d / "HEAD").is_file()), None)
         found = git_dir is not None and subprocess.run(
@@ -101,13 +113,15 @@ def write_scans(tree: ScanTree, names: list[str], stage: Path) -> list[dict[str,
             raise LookalikeError(f"{tree.root}: {where}/model_0.obj: {exc}") from None
         mesh_file, texture_file = write_scan(stage / "scans" / name, mesh, tree.read(f"{where}/texture.png"))
         rows.append(dict(scan=name, mesh=f"scans/{mesh_file}", texture=f"scans/{texture_file}",
-                         source=f"{GSO_REPO}@{GSO_COMMIT[:7]}:{where}", licence=GSO_LICENCE))
+                         source=tree.source(where), licence=GSO_LICENCE))
     return rows
 
 
-def notice(rows: list[dict[str, str]]) -> str:
+def notice(tree: ScanTree, rows: list[dict[str, str]]) -> str:
     """NOTICE.md of a scan folder: the attribution CC BY asks for, one line per scan."""
     lines = "\n".join(f"- `{r['scan']}`: {r['source']}, {r['licence']}" for r in rows)
+    read_from = f"at commit {GSO_COMMIT}" if tree.checked else \
+        f"from a copy without .git, taken to be commit {GSO_COMMIT} (unchecked: the copy has no history to check)"
     return f"""# Sources and licences of these scans
 
 Every mesh and texture here is a scan of the Google Scanned Objects collection by Google Research,
@@ -115,24 +129,29 @@ licensed under CC BY 4.0; pin_match converted each OBJ to a compact mesh (same v
 and UVs, moved to stand on z = 0) and kept its texture as published. Cite:
 {GSO_CITATION}
 
-They were read from {GSO_REPO} at commit {GSO_COMMIT} (folder `{GSO_FOLDER}/`; that repository's own
+They were read from {GSO_REPO} {read_from} (folder `{GSO_FOLDER}/`; that repository's own
 code is Apache-2.0, the scans are Google's). {len(rows)} scans:
 
 {lines}
 """
 
 
+def copy_families(stage: Path) -> list[dict[str, str]]:
+    """The look-alike families shipped with pin_match, as a scan folder's ``families.csv``."""
+    atomic.write_bytes(stage / "families.csv", (PACKAGED_SCANS / "families.csv").read_bytes())
+    return []
+
+
+SCAN_INDEX = IndexTable("scans.csv", SCAN_COLUMNS)
+
+
 def write_scan_folder(tree: ScanTree, out: str | Path, names: list[str] | None = None, *,
                       overwrite: bool = False) -> Path:
     """Write a scan folder at ``out`` holding ``names`` (default: every scan), the shipped families and a NOTICE."""
-    out = Path(out)
     names = names if names is not None else tree.scan_names()
-    with staged_source(out, overwrite) as stage:
-        rows = write_scans(tree, names, stage)
-        write_csv(stage / "scans.csv", SCAN_COLUMNS, rows)
-        atomic.write_bytes(stage / "families.csv", (PACKAGED_SCANS / "families.csv").read_bytes())
-        atomic.write_text(stage / "NOTICE.md", notice(rows))
-    return out
+    return write_source_folder(out, lambda stage: write_scans(tree, names, stage),
+                               lambda rows, _families: notice(tree, rows), index=SCAN_INDEX,
+                               write_rest=copy_families, overwrite=overwrite)
 
 
 def prepare_gso(checkout: Path, out: Path, *, overwrite: bool = False) -> Path:
@@ -141,6 +160,7 @@ def prepare_gso(checkout: Path, out: Path, *, overwrite: bool = False) -> Path:
 
 
 def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:
+    """The synthetic generator at its default sizes: the scans shipped with pin_match, or those of ``src``."""
     from pin_match.data.synth import SynthSize, generate  # pybullet loads only when a set is rendered
 
     return generate(out, SynthSize(seed=seed), scans=src, overwrite=overwrite)
@@ -148,7 +168,8 @@ def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bo
 
 SOURCE = register(DataSource(
     name="gso",
-    summary="Google Scanned Objects in look-alike families, rendered along PIN walks (the default set's scans "
-            "from all 400 of a prepared folder; docs/synthetic.md)",
-    licence=GSO_LICENCE, variants=("default",), make=_make, src=SRC_REQUIRED, prepare_inputs=("CHECKOUT",),
-    make_source=prepare_gso))
+    summary="Google Scanned Objects in look-alike families, rendered on the CPU along PIN walks: without --src "
+            "the embedded default set (the 96 scans shipped with pin_match, as `pin-match synth` with its default "
+            "sizes), with --src a prepared folder's families drawn from all 400 (docs/synthetic.md)",
+    licence=f"{GSO_LICENCE}; each scan named in the frame-set's objects.csv and in the scan folder's NOTICE.md",
+    variants=("default",), make=_make, src=SRC_OPTIONAL, prepare_inputs=("CHECKOUT",), make_source=prepare_gso))

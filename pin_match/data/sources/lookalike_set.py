@@ -47,6 +47,7 @@ from pin_match.data.compose import (
     scale_brightness,
     stable_seed,
 )
+from pin_match.data.csv_rows import read_rows
 from pin_match.data.frameset import FrameSet
 from pin_match.data.images import read_image, read_object_mask
 from pin_match.data.sources.photo_folder import (
@@ -58,7 +59,6 @@ from pin_match.data.sources.photo_folder import (
     balanced_splits,
     instance_splits,
     load_photos,
-    read_csv,
 )
 from pin_match.data.writer import FrameSetWriter
 
@@ -204,23 +204,12 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
     src = Path(src) if src is not None else PACKAGED_SRC
     every_photo = load_photos(src)
     photos = [p for p in every_photo if p.photo_id not in leave_out]
-    rooms = read_csv(src / "rooms.csv", ROOM_COLUMNS)
-    room_file = {r["room_id"]: src / r["file"] for r in rooms}
-    by_id = {p.photo_id: p for p in photos}
+    rooms = read_rows(src / "rooms.csv", ROOM_COLUMNS, LookalikeError)
+    folder = _SourceFolder(src, {p.photo_id: p for p in photos}, {r["room_id"]: src / r["file"] for r in rooms})
     split = balanced_splits(photos) if variant == "approach" else instance_splits(photos)
-    plans = plan_episodes(photos, sorted(room_file), seed, split)
+    plans = plan_episodes(photos, sorted(folder.room_file), seed, split)
     if variant == "approach":
-        plans = [approach_plan(p, sorted(room_file), seed) for p in plans]
-
-    def image_and_mask(photo_id: str) -> tuple[np.ndarray, np.ndarray]:
-        p = by_id[photo_id]
-        rgb = read_image(src / p.file)
-        return rgb, read_object_mask(src / p.mask, rgb.shape[:2])
-
-    used = _objects_used(plans, by_id)
-    own_photos: dict[str, list[Photo]] = {}
-    for p in sorted(photos, key=lambda p: p.photo_id):
-        own_photos.setdefault(p.instance_id, []).append(p)
+        plans = [approach_plan(p, sorted(folder.room_file), seed) for p in plans]
     # "generator" is the name frame-sets of this builder have always recorded, not a module path: moving the
     # code must not change a frame-set's bytes
     provenance = dict(generator="pin_match.lookalikes", version=LOOKALIKES_VERSION, variant=variant, seed=seed,
@@ -230,27 +219,55 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
         provenance["left_out"] = sorted(p.photo_id for p in every_photo if p.photo_id in leave_out)
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance, image_ext=".png")
     with writer:
-        for inst in sorted(used):
-            ref_ids = used[inst] or tuple(p.photo_id for p in reference_photos(own_photos[inst], keep_one=False))
-            cut = [cutout(*image_and_mask(pid)) for pid in ref_ids]
-            category = own_photos[inst][0].category
-            writer.add_object(inst, category, split[inst], reference_views(cut), _descriptions(inst, category))
+        _write_objects(writer, folder, photos, plans, split)
         for plan in plans:
-            distractors = sorted({by_id[pid].instance_id for kind, pid in plan.frames
-                                  if kind in ("lookalike", "other")})
-            writer.add_episode(plan.episode_id, plan.split, f"lookalike_{variant}_{plan.target}", plan.target,
-                               distractors)
-            roles = writer.roles(plan.episode_id)
-            for step, (kind, item) in enumerate(plan.frames):
-                rng = np.random.default_rng(stable_seed(seed, variant, plan.episode_id, step))
-                if kind == "empty":
-                    image = room_crop(read_image(room_file[item]), rng)
-                    writer.add_frame(plan.episode_id, step, image, np.zeros(image.shape[:2], np.uint16), {})
-                    continue
-                image, frame_mask = _object_frame(*image_and_mask(item), variant, plan, step, room_file, rng)
-                inst = by_id[item].instance_id
-                writer.add_frame(plan.episode_id, step, image, frame_mask, {1: (inst, roles[inst])})
+            _write_episode(writer, folder, plan, variant, seed)
         return writer.close()
+
+
+@dataclass(frozen=True)
+class _SourceFolder:
+    """What a build reads from its source folder: the photos it uses, by id, and the room photos' files, by id."""
+
+    root: Path
+    by_id: dict[str, Photo]
+    room_file: dict[str, Path]
+
+    def image_and_mask(self, photo_id: str) -> tuple[np.ndarray, np.ndarray]:
+        p = self.by_id[photo_id]
+        rgb = read_image(self.root / p.file)
+        return rgb, read_object_mask(self.root / p.mask, rgb.shape[:2])
+
+
+def _write_objects(writer: FrameSetWriter, folder: _SourceFolder, photos: Sequence[Photo],
+                   plans: Sequence[EpisodePlan], split: dict[str, str]) -> None:
+    """Every instance the episodes show, with its reference views cut out of its photos."""
+    own_photos: dict[str, list[Photo]] = {}
+    for p in sorted(photos, key=lambda p: p.photo_id):
+        own_photos.setdefault(p.instance_id, []).append(p)
+    used = _objects_used(plans, folder.by_id)
+    for inst in sorted(used):
+        ref_ids = used[inst] or tuple(p.photo_id for p in reference_photos(own_photos[inst], keep_one=False))
+        cut = [cutout(*folder.image_and_mask(pid)) for pid in ref_ids]
+        category = own_photos[inst][0].category
+        writer.add_object(inst, category, split[inst], reference_views(cut), _descriptions(inst, category))
+
+
+def _write_episode(writer: FrameSetWriter, folder: _SourceFolder, plan: EpisodePlan, variant: str,
+                   seed: int) -> None:
+    """One planned episode and its frames: empty room crops, photos, or their objects pasted into rooms."""
+    distractors = sorted({folder.by_id[pid].instance_id for kind, pid in plan.frames if kind in ("lookalike", "other")})
+    writer.add_episode(plan.episode_id, plan.split, f"lookalike_{variant}_{plan.target}", plan.target, distractors)
+    roles = writer.roles(plan.episode_id)
+    for step, (kind, item) in enumerate(plan.frames):
+        rng = np.random.default_rng(stable_seed(seed, variant, plan.episode_id, step))
+        if kind == "empty":
+            image = room_crop(read_image(folder.room_file[item]), rng)
+            writer.add_frame(plan.episode_id, step, image, np.zeros(image.shape[:2], np.uint16), {})
+            continue
+        image, frame_mask = _object_frame(*folder.image_and_mask(item), variant, plan, step, folder.room_file, rng)
+        inst = folder.by_id[item].instance_id
+        writer.add_frame(plan.episode_id, step, image, frame_mask, {1: (inst, roles[inst])})
 
 
 def _objects_used(plans: Sequence[EpisodePlan], by_id: dict[str, Photo]) -> dict[str, tuple[str, ...]]:

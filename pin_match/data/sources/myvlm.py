@@ -37,11 +37,12 @@ import cv2
 import numpy as np
 
 from pin_match.data.compose import largest_piece
+from pin_match.data.csv_rows import read_rows
 from pin_match.data.images import read_image
 from pin_match.data.mask_check import mask_problems
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
-from pin_match.data.sources.photo_folder import LookalikeError, category_splits, read_csv
+from pin_match.data.sources.photo_folder import LookalikeError, category_splits
 from pin_match.data.sources.prepare import Checkout, add_photo, notice, open_checkout, write_source_folder
 
 MYVLM_SOURCE = "github:woonsango/MyVLM"
@@ -95,7 +96,7 @@ def read_boxes(path: str | Path = BOXES_CSV) -> list[BoxedPhoto]:
     """The annotated photos: a box, or the reason the photo is left out, never both."""
     path = Path(path)
     out = []
-    for r in read_csv(path, BOX_COLUMNS):
+    for r in read_rows(path, BOX_COLUMNS, LookalikeError):
         if r["concept"] not in CONCEPT_CATEGORIES:
             raise LookalikeError(f"{path}: unknown concept {r['concept']!r} (known: {sorted(CONCEPT_CATEGORIES)})")
         coords = [r[c].strip() for c in BOX_COLUMNS[2:6]]

@@ -16,15 +16,13 @@ its instance's reference views and never a frame).
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from pin_match import atomic
 from pin_match.data.compose import stable_seed
+from pin_match.data.csv_rows import read_rows
 from pin_match.data.frameset import SPLITS
 from pin_match.errors import PinMatchError
 
@@ -52,29 +50,10 @@ class Photo:
     use: str = ""  # REFERENCE_USE: a reference view only, never a frame; "" = either, by the plan's rule
 
 
-def write_csv(path: Path, columns: Sequence[str], rows: list[dict]) -> None:
-    """Write ``rows`` under a header of ``columns``, atomically (a source folder is never half-written)."""
-    buf = io.StringIO()
-    w = csv.DictWriter(buf, fieldnames=list(columns), lineterminator="\n")
-    w.writeheader()
-    w.writerows(rows)
-    atomic.write_text(path, buf.getvalue())
-
-
-def read_csv(path: Path, columns: Sequence[str]) -> list[dict]:
-    if not path.is_file():
-        raise LookalikeError(f"{path} is missing (a look-alike source folder needs photos.csv and rooms.csv)")
-    with path.open(newline="") as f:
-        rows = list(csv.DictReader(f))
-    if not rows or any(c not in rows[0] for c in columns):
-        raise LookalikeError(f"{path} needs a header with {list(columns)} and at least one row")
-    return rows
-
-
 def load_photos(src: str | Path) -> list[Photo]:
     path = Path(src) / "photos.csv"
     photos = [Photo(r["photo_id"], r["instance_id"], r["category"], r["file"], r["mask"], r.get("split") or "",
-                    r.get("use") or "") for r in read_csv(path, PHOTO_COLUMNS)]
+                    r.get("use") or "") for r in read_rows(path, PHOTO_COLUMNS, LookalikeError)]
     for p in photos:
         if p.split not in ("", *SPLITS) or p.use not in ("", REFERENCE_USE):
             raise LookalikeError(f"{path}: photo {p.photo_id!r} has split {p.split!r} and use {p.use!r} "

@@ -1,11 +1,13 @@
-"""Writing a look-alike source folder from a downloaded repository: the steps every such source takes once.
+"""Writing a source folder from a downloaded repository: the steps every such source takes once.
 
 ``open_checkout`` checks the download (the file that makes it the repository named, its
 licence file) and records the commit it is at; ``write_source_folder`` writes the folder into
-a hidden stage beside ``out`` (photos and masks by the source's own function, then
-``photos.csv``, the empty rooms shipped with pin_match and a NOTICE.md with the licence text)
-and renames it onto ``out`` only when all of that succeeded. ``object_mask`` is the automatic
-mask of a photo centred on one hand-held object, used by the sources that have no masks.
+a hidden stage beside ``out`` (the items by the source's own function, then their index table,
+the rest of the folder and a NOTICE.md attributing every item) and renames it onto ``out`` only
+when all of that succeeded: the look-alike sources' photos (``photos.csv``, the empty rooms
+shipped with pin_match) and the ``gso`` scans (``scans.csv``, the shipped families) alike.
+``object_mask`` is the automatic mask of a photo centred on one hand-held object, used by the
+sources that have no masks.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.data.compose import largest_piece
+from pin_match.data.csv_rows import read_rows, write_rows
 from pin_match.data.mask_check import skin_pixels
 from pin_match.data.sources.photo_folder import (
     OPTIONAL_PHOTO_COLUMNS,
@@ -31,8 +34,6 @@ from pin_match.data.sources.photo_folder import (
     PHOTO_COLUMNS,
     ROOM_COLUMNS,
     LookalikeError,
-    read_csv,
-    write_csv,
 )
 
 JPEG_QUALITY = 95  # photos a source re-encodes (cropped, recoloured) are stored at this quality
@@ -44,7 +45,7 @@ class Checkout:
 
     root: Path
     repo: str
-    commit: str | None  # None when the download is not a git checkout
+    commit: str | None  # None: a copy without .git, whose commit is unknown (each NOTICE.md says so)
     licence_text: str
 
     @property
@@ -53,14 +54,30 @@ class Checkout:
         return f"{self.repo}@{self.commit}" if self.commit else self.repo
 
 
+class CommitError(LookalikeError):
+    """A checkout whose commit git cannot read: git is missing or its ``.git`` is damaged."""
+
+
 def checkout_commit(repo: Path) -> str | None:
-    """The commit a downloaded repository is at (None when not a git checkout)."""
-    try:
-        done = subprocess.run(["git", "-C", str(repo), "rev-parse", "HEAD"], capture_output=True, text=True,
-                              timeout=30)
-    except (OSError, subprocess.SubprocessError):
+    """The commit a downloaded repository is at, read from its own ``.git``; None for a copy without one.
+
+    Only the copy's own ``.git`` is asked (``git -C`` on a plain copy would report the commit of
+    a repository around it). A ``.git`` that git cannot read is a ``CommitError`` naming the
+    folder: a source records a commit it read, or says that it has none, never a failure as none.
+    """
+    git_dir = repo / ".git"
+    if not git_dir.exists():
         return None
-    return done.stdout.strip() if done.returncode == 0 and done.stdout.strip() else None
+    try:
+        done = subprocess.run(["git", "--git-dir", str(git_dir), "rev-parse", "--verify", "HEAD^{commit}"],
+                              capture_output=True, text=True, timeout=30)
+    except (OSError, subprocess.SubprocessError) as exc:
+        raise CommitError(f"{repo}: cannot run git to read the commit of {git_dir} ({exc}); install git, or "
+                          "prepare from a copy without .git (recorded as commit unknown)") from None
+    if done.returncode or not done.stdout.strip():
+        raise CommitError(f"{repo}: git cannot read the commit of {git_dir}: "
+                          f"{done.stderr.strip() or 'it printed nothing'}")
+    return done.stdout.strip()
 
 
 def open_checkout(root: str | Path, repo: str, marker: str | Path, what: str, licence_note: str) -> Checkout:
@@ -112,10 +129,10 @@ def add_photo(stage: Path, photo_id: str, image: bytes | np.ndarray, suffix: str
 
 def copy_packaged_rooms(stage: Path) -> list[dict[str, str]]:
     """Copy the empty rooms shipped with pin_match into a source folder being written; their rows."""
-    rows = read_csv(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS)
+    rows = read_rows(PACKAGED_SRC / "rooms.csv", ROOM_COLUMNS, LookalikeError)
     for r in rows:
         atomic.write_bytes(stage / r["file"], (PACKAGED_SRC / r["file"]).read_bytes())
-    write_csv(stage / "rooms.csv", ROOM_COLUMNS, rows)
+    write_rows(stage / "rooms.csv", ROOM_COLUMNS, rows)
     return rows
 
 
@@ -136,24 +153,38 @@ def notice(photos: str, rooms: list[dict[str, str]], licensor: str, licence_text
 """
 
 
-def write_source_folder(out: str | Path, write_photos: Callable[[Path], list[dict[str, str]]],
-                        describe: Callable[[list[dict[str, str]], list[dict[str, str]]], str], *,
-                        write_rooms: Callable[[Path], list[dict[str, str]]] = copy_packaged_rooms,
-                        overwrite: bool = False) -> Path:
-    """Write a source folder: ``write_photos(stage)`` writes the photos and masks and returns their rows.
+@dataclass(frozen=True)
+class IndexTable:
+    """The table listing a source folder's items: its file name, its columns, and the optional columns written when
+    some row has them."""
 
-    Then ``photos.csv`` (the optional columns that some row has), the rooms (``write_rooms``:
-    the shipped ones unless the source brings its own) and ``NOTICE.md`` (``describe(rows,
-    room_rows)``, every photo's attribution); all in a stage renamed onto ``out`` at the end, so
-    a failure leaves no half-written folder.
+    file: str
+    columns: tuple[str, ...]
+    optional: tuple[str, ...] = ()
+
+
+PHOTO_INDEX = IndexTable("photos.csv", PHOTO_COLUMNS, OPTIONAL_PHOTO_COLUMNS)
+
+
+def write_source_folder(out: str | Path, write_items: Callable[[Path], list[dict[str, str]]],
+                        describe: Callable[[list[dict[str, str]], list[dict[str, str]]], str], *,
+                        index: IndexTable = PHOTO_INDEX,
+                        write_rest: Callable[[Path], list[dict[str, str]]] = copy_packaged_rooms,
+                        overwrite: bool = False) -> Path:
+    """Write a source folder: ``write_items(stage)`` writes the items (photos and masks) and returns their rows.
+
+    Then the ``index`` table of those rows (``photos.csv`` by default), the rest of the folder
+    (``write_rest``: the shipped rooms unless the source brings its own, or a scan folder's
+    families) and ``NOTICE.md`` (``describe(rows, rest_rows)``, every item's attribution); all in
+    a stage renamed onto ``out`` at the end, so a failure leaves no half-written folder.
     """
     out = Path(out)
     with staged_source(out, overwrite) as stage:
-        rows = write_photos(stage)
-        optional = [c for c in OPTIONAL_PHOTO_COLUMNS if any(c in r for r in rows)]
-        write_csv(stage / "photos.csv", [*PHOTO_COLUMNS, *optional], rows)
-        room_rows = write_rooms(stage)
-        atomic.write_text(stage / "NOTICE.md", describe(rows, room_rows))
+        rows = write_items(stage)
+        optional = [c for c in index.optional if any(c in r for r in rows)]
+        write_rows(stage / index.file, [*index.columns, *optional], rows)
+        rest_rows = write_rest(stage)
+        atomic.write_text(stage / "NOTICE.md", describe(rows, rest_rows))
     return out
 
 

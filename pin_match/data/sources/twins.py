@@ -19,10 +19,11 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.data.compose import rotate_hue
+from pin_match.data.csv_rows import read_rows, write_rows
 from pin_match.data.images import read_image, read_object_mask
 from pin_match.data.sources import lookalike_set
 from pin_match.data.sources.catalogue import SRC_REQUIRED, DataSource, register
-from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, ROOM_COLUMNS, LookalikeError, read_csv, write_csv
+from pin_match.data.sources.photo_folder import PHOTO_COLUMNS, ROOM_COLUMNS, LookalikeError
 from pin_match.data.sources.prepare import write_source_folder
 
 
@@ -36,7 +37,7 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
     Written through ``prepare.write_source_folder``. Returns ``out``.
     """
     src = Path(src)
-    rows = read_csv(src / "photos.csv", PHOTO_COLUMNS)
+    rows = read_rows(src / "photos.csv", PHOTO_COLUMNS, LookalikeError)
     if "split" not in rows[0]:
         raise LookalikeError(f"{src / 'photos.csv'} has no split column: twins need each photo's split")
     notice_file = src / "NOTICE.md"
@@ -64,9 +65,9 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
         return rows + twins
 
     def write_rooms(stage: Path) -> list[dict[str, str]]:
-        room_rows = read_csv(src / "rooms.csv", ROOM_COLUMNS)
+        room_rows = read_rows(src / "rooms.csv", ROOM_COLUMNS, LookalikeError)
         shutil.copytree(src / "rooms", stage / "rooms")
-        write_csv(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
+        write_rows(stage / "rooms.csv", ROOM_COLUMNS, room_rows)
         return room_rows
 
     def describe(all_rows: list[dict[str, str]], room_rows: list[dict[str, str]]) -> str:
@@ -75,7 +76,7 @@ def add_recoloured_twins(src: str | Path, out: str | Path, *, hue: int = 90, min
                 f"(`*_hue{hue}`) are the {split} photos of colourful instances with the hue rotated by {hue} under "
                 "their masks; they keep their originals' licence and attribution above.\n")
 
-    return write_source_folder(out, write_photos, describe, write_rooms=write_rooms, overwrite=overwrite)
+    return write_source_folder(out, write_photos, describe, write_rest=write_rooms, overwrite=overwrite)
 
 
 SOURCE = register(DataSource(

@@ -17,17 +17,19 @@ import numpy as np
 
 from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.frameset import FrameSet
+from pin_match.data.geometry import CameraModel, EpisodeGeometry
+from pin_match.data.geometry import Pose as CameraPose
 from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
 from pin_match.data.synth.scene import make_room, place_objects
 from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.size import DEFAULT_SIZE, SynthSize
-from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk
+from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk, geodesic_lengths
 from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 3
+GENERATOR_VERSION = 4  # 4: camera poses, object positions and geodesic lengths recorded (frames unchanged)
 
 
 @dataclass(frozen=True)
@@ -134,7 +136,24 @@ def _look(mesh: Mesh, at: tuple[float, float, float]) -> Goal:
     return Goal(at[0], at[1], at[2] + height / 2, mesh.side_area())
 
 
-def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
+def _camera_pose(pose: Pose) -> CameraPose:
+    x, y, yaw, pitch = pose
+    return CameraPose(x, y, CAMERA_HEIGHT, yaw, pitch)
+
+
+def _episode_geometry(plan: EpisodePlan, room, obstacles, walk: list[Pose],
+                      centres: list[tuple[float, float, float]]) -> EpisodeGeometry:
+    """Where the walk starts, every placed object's centre, and the geodesic length to the target and to each
+    same-category look-alike."""
+    ids = [spec.object_id for spec in plan.objects]
+    measured = [k for k, role in enumerate(plan.roles) if role in ("target", "same_category")]
+    lengths = geodesic_lengths(room, obstacles, walk[0][:2], [centres[k][:2] for k in measured])
+    x, y, yaw, _ = walk[0]
+    return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, centres)),
+                           {ids[k]: length for k, length in zip(measured, lengths)})
+
+
+def render_episode(plan: EpisodePlan) -> tuple[list[FrameRecord], EpisodeGeometry]:
     r = _renderer()
     r.reset()
     room = make_room(np.random.default_rng(plan.scene_seed))
@@ -146,14 +165,17 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
     for mesh, _ in built:
         lo, hi = mesh.bounds
         sizes.append((float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2]), mesh.side_area()))
-    spots = place_objects(room, sizes, rng)
+    lookalikes = frozenset(k for k, role in enumerate(plan.roles) if role == "same_category")
+    spots = place_objects(room, sizes, rng, lookalikes)
     lut = np.zeros(1, np.uint16)
     legend = {}
     looks: dict[str, list[Goal]] = {"target": [], "same_category": []}
     bodies: dict[Goal, int] = {}
     obstacles = list(room.footprints)
+    centres = []
     for k, ((mesh, atlas), (x, y, z, yaw), spec, role) in enumerate(zip(built, spots, plan.objects, plan.roles)):
         body = r.add(mesh, atlas, (x, y, z), yaw)
+        centres.append((float(x), float(y), float(z + sizes[k][1] / 2)))  # meshes are centred on x, y
         if body + 2 > len(lut):
             lut = np.concatenate([lut, np.zeros(body + 2 - len(lut), np.uint16)])
         lut[body + 1] = k + 1
@@ -179,8 +201,9 @@ def render_episode(plan: EpisodePlan) -> list[FrameRecord]:
         rgb, ids, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
         mask = lut[np.clip(ids + 1, 0, len(lut) - 1)]
         image = _camera_look(rgb, gain, np.random.default_rng(stable_seed(plan.seed, "noise", step)))
-        records.append(encode_frame(plan.staging, plan.episode_id, step, Frame(image, mask, legend, depth)))
-    return records
+        records.append(encode_frame(plan.staging, plan.episode_id, step,
+                                    Frame(image, mask, legend, depth, _camera_pose(pose))))
+    return records, _episode_geometry(plan, room, obstacles, walk, centres)
 
 
 # ------------------------------------------------------------------ entry point
@@ -207,7 +230,8 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                       scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
-    writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance)
+    writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance,
+                            camera=CameraModel(HFOV))
     with writer:
         workers = max(1, workers or os.cpu_count() or 1)
         pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
@@ -226,8 +250,10 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                                          stable_seed(seed, "episode", episode_id),
                                          tuple(objs), tuple(roles[o.object_id] for o in objs), size.frames_per_episode,
                                          str(writer.staging)))
-            for records in tqdm(imap(render_episode, plans), total=len(plans), desc="render episodes",
-                                unit="episode", disable=not progress, dynamic_ncols=True):
+            for plan, (records, geometry) in zip(plans, tqdm(imap(render_episode, plans), total=len(plans),
+                                                             desc="render episodes", unit="episode",
+                                                             disable=not progress, dynamic_ncols=True)):
+                writer.add_geometry(plan.episode_id, geometry)
                 for rec in records:
                     writer.add_frame_record(rec)
         finally:

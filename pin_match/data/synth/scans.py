@@ -10,7 +10,6 @@ reads that back, checked, with errors that name the file.
 
 from __future__ import annotations
 
-import csv
 import io
 import zipfile
 from dataclasses import dataclass
@@ -19,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from pin_match import atomic
+from pin_match.data.csv_rows import read_rows
 from pin_match.data.images import read_image
 from pin_match.data.synth.shapes import Mesh
 from pin_match.errors import PinMatchError
@@ -151,9 +151,9 @@ class ScanFolder:
     @classmethod
     def open(cls, root: str | Path = PACKAGED_SCANS) -> ScanFolder:
         root = Path(root)
-        scans = {r["scan"]: r for r in _read_rows(root / "scans.csv", SCAN_COLUMNS)}
+        scans = {r["scan"]: r for r in read_rows(root / "scans.csv", SCAN_COLUMNS, ScanError)}
         members = tuple(Member(r["family"], r["scan"], r["split"], r["difference"])
-                        for r in _read_rows(root / "families.csv", FAMILY_COLUMNS))
+                        for r in read_rows(root / "families.csv", FAMILY_COLUMNS, ScanError))
         seen: set[str] = set()
         for m in members:
             where = f"{root / 'families.csv'}: scan {m.scan!r}"
@@ -171,13 +171,3 @@ class ScanFolder:
         row = self.scans[name]
         return load_scan(self.root, name, row["mesh"], row["texture"])
 
-
-def _read_rows(path: Path, columns: tuple[str, ...]) -> list[dict[str, str]]:
-    try:
-        with path.open(newline="", encoding="utf-8") as f:
-            rows = list(csv.DictReader(f))
-    except OSError as exc:
-        raise ScanError(f"cannot read {path}: {exc.strerror or exc}") from None
-    if not rows or any(c not in rows[0] for c in columns):
-        raise ScanError(f"{path} needs a header with {list(columns)} and at least one row")
-    return rows

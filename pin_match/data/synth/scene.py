@@ -240,7 +240,7 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> N
 
 
 def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.random.Generator,
-                  ) -> list[tuple[float, float, float, float]]:
+                  lookalikes: frozenset[int] = frozenset()) -> list[tuple[float, float, float, float]]:
     """Stand objects (radius, height, side area) on free spots of the room's surfaces: (x, y, z, yaw) each.
 
     Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
@@ -255,33 +255,61 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     middle stays free for the camera walk. Every draw comes from ``rng``, so the result is
     still a pure function of the seeds. Only a room without any free floor along its walls is
     an error.
+
+    The objects at the indices ``lookalikes`` (the target's same-category look-alikes; the
+    target is the first object) stand at least ``LOOKALIKE_GAP`` from the target where the room
+    allows it, as PIN's look-alikes stand elsewhere in the house: an agent that stops at a
+    look-alike is then more than PIN's 1 m success distance from the target, a category error
+    and not a success.
     """
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
-    weights = np.array([np.sqrt(s.area) for s in room.surfaces])
-    high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
-    for radius, height, side_area in sizes:
-        fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
-                         and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
-        spot = None
-        if side_area < SMALL_AREA:
-            spot = _surface_spot(room, weights * fits * high, radius, taken, rng)
-        spot = spot or _surface_spot(room, weights * fits, radius, taken, rng)
+    for k, (radius, height, side_area) in enumerate(sizes):
+        away = (taken[0][0], taken[0][1], LOOKALIKE_GAP) if k in lookalikes and taken else None
+        spot = _spot(room, (radius, height, side_area), taken, rng, away)
+        if spot is None and away is not None:
+            spot = _spot(room, (radius, height, side_area), taken, rng, None)
         if spot is None:
-            x, y = _floor_spot(room, radius, taken, rng)
-            spot = (x, y, 0.0)
+            raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
+                             f"{room.width:.1f} x {room.depth:.1f} m room")
         taken.append((spot[0], spot[1], spot[2], radius))
         out.append((*spot, float(rng.uniform(-np.pi, np.pi))))
     return out
 
 
+Away = tuple[float, float, float] | None  # (x, y, least distance) a spot must keep from, or no constraint
+
+
+def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float, float, float, float]],
+          rng: np.random.Generator, away: Away) -> tuple[float, float, float] | None:
+    """A surface spot (a high one first for a small product), else the floor along a wall; None if neither."""
+    radius, height, side_area = size
+    weights = np.array([np.sqrt(s.area) for s in room.surfaces])
+    high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
+    fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
+                     and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
+    spot = None
+    if side_area < SMALL_AREA:
+        spot = _surface_spot(room, weights * fits * high, radius, taken, rng, away)
+    spot = spot or _surface_spot(room, weights * fits, radius, taken, rng, away)
+    if spot is None:
+        floor = _floor_spot(room, radius, taken, rng, away)
+        spot = None if floor is None else (*floor, 0.0)
+    return spot
+
+
+def _far(x: float, y: float, away: Away) -> bool:
+    return away is None or np.hypot(x - away[0], y - away[1]) >= away[2]
+
+
 def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
-                  rng: np.random.Generator) -> tuple[float, float, float] | None:
+                  rng: np.random.Generator, away: Away = None) -> tuple[float, float, float] | None:
     """A free spot (x, y, z) on a surface drawn with weights ``p``, clear of the objects already placed; or None."""
     for _ in range(200 if p.sum() else 0):
         s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
         x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
-        if all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02 for ox, oy, z, r in taken):
+        if _far(x, y, away) and all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
+                                    for ox, oy, z, r in taken):
             return float(x), float(y), float(s.z)
     return None
 
@@ -290,11 +318,12 @@ SMALL_ON_FLOOR = 0.12  # objects of a smaller radius go on furniture: seen from 
 SMALL_AREA = 0.01  # m^2 seen side-on: a supplement bottle (0.004), an ink box (0.008), a game case (0.007)
 SMALL_MIN_HEIGHT = 0.78  # cabinets and the upper shelf boards: shallow, so a camera can stand within 0.6 m
 FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
+LOOKALIKE_GAP = 2.2  # metres between the target and a look-alike: more than PIN's 1 m success distance twice over
 
 
 def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float, float]],
-                rng: np.random.Generator, tries: int = 500) -> tuple[float, float]:
-    """A free floor position for an object of ``radius``, clear of furniture and other objects.
+                rng: np.random.Generator, away: Away = None, tries: int = 500) -> tuple[float, float] | None:
+    """A free floor position for an object of ``radius``, clear of furniture and other objects; None if none.
 
     Close to a wall first, so the room's middle stays free for the camera walk; the band
     widens only when the walls are full.
@@ -309,7 +338,7 @@ def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float
                 continue
             if _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.05):
                 continue
-            if all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02 for ox, oy, z, r in taken):
+            if _far(x, y, away) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
+                                        for ox, oy, z, r in taken):
                 return float(x), float(y)
-    raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
-                     f"{W:.1f} x {D:.1f} m room")
+    return None

@@ -21,8 +21,9 @@ the field of view is brought into it by tilting, as a robot's head would.
 
 from __future__ import annotations
 
+import heapq
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -98,6 +99,26 @@ class Grid:
                         queue.append(n)
         return parent
 
+    def path_lengths(self, start: tuple[int, int]) -> np.ndarray:
+        """Shortest 8-connected walk (metres, a diagonal step sqrt(2) cells) from ``start`` to every cell; inf where
+        unreachable (Dijkstra)."""
+        dist = np.full(self.free.shape, np.inf)
+        dist[start] = 0.0
+        queue = [(0.0, start)]
+        while queue:
+            d, c = heapq.heappop(queue)
+            if d > dist[c]:
+                continue
+            for dx in (-1, 0, 1):
+                for dy in (-1, 0, 1):
+                    n = (c[0] + dx, c[1] + dy)
+                    if (dx or dy) and 0 <= n[0] < self.nx and 0 <= n[1] < self.ny and self.free[n]:
+                        step = d + CELL * (1.4142135623730951 if dx and dy else 1.0)
+                        if step < dist[n]:
+                            dist[n] = step
+                            heapq.heappush(queue, (step, n))
+        return dist
+
     def line_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         n = int(np.ceil(np.linalg.norm(b - a) / (CELL / 2))) + 1
         return all(self.free[self.cell(a + (b - a) * t)] for t in np.linspace(0, 1, n))
@@ -155,6 +176,19 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
         walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], LOOKALIKE_RUN, stop=False)
     walk.approach(target, TARGET_RUN, stop=True)
     return walk.poses
+
+
+def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, float]], start: Sequence[float],
+                     goals: Sequence[Sequence[float]]) -> list[float]:
+    """PIN's ``geodesic_distance`` from ``start`` (x, y) to each goal (x, y): the shortest walk on the camera's grid
+    to a reachable cell, then the straight stretch from that cell to the object (which stands on furniture or a
+    rug the walk keeps clear of)."""
+    grid = Grid(room, obstacles)
+    dist = grid.path_lengths(grid.cell(start))
+    cells = np.argwhere(np.isfinite(dist))
+    walked = dist[cells[:, 0], cells[:, 1]]
+    centres = (cells + 0.5) * CELL
+    return [float(np.min(walked + np.hypot(centres[:, 0] - g[0], centres[:, 1] - g[1]))) for g in goals]
 
 
 def _start(grid: Grid, rng: np.random.Generator) -> tuple[tuple[int, int], np.ndarray]:
