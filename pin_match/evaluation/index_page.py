@@ -17,10 +17,12 @@ import numpy as np
 from markupsafe import Markup
 
 from pin_match.evaluation import html
+from pin_match.evaluation.analysis import BenchRun
 from pin_match.evaluation.bench import Bench
 from pin_match.evaluation.compare import Comparison
 from pin_match.evaluation.gallery import first_matches, frame_roles
 from pin_match.evaluation.layout import BenchLayout
+from pin_match.evaluation.navigation import episodes_at
 from pin_match.evaluation.pictures import legend, reference_images, scored_frame_image
 
 EPISODES_SHOWN = 6
@@ -55,6 +57,21 @@ def headline(results: Sequence[dict]) -> str:
     return f"First match is the target (the frame where PIN's agent would stop): {lines}. Sigma: {', '.join(sources)}."
 
 
+def navigation_line(results: Sequence[dict]) -> str | None:
+    """SR and CE of each matcher (the navigation estimate, with intervals), or None without geometry."""
+    if not all("sr" in r["metrics"] for r in results):
+        return None
+
+    def said(r: dict, key: str) -> str:
+        ci = r["ci95"].get(key)
+        return f"{r['metrics'][key]:.1f} %" + (f" ({ci[0]:.1f}-{ci[1]:.1f})" if ci else "")
+
+    parts = [f"{r['matcher']} SR {said(r, 'sr')}, CE {said(r, 'ce')}" for r in results]
+    return ("What the agent would do (estimated from the recorded walks: the stop is the first match placed with "
+            "depth, the agent walks to it; success within 1 m of the target, CE within 1 m of a look-alike): "
+            + "; ".join(parts) + ".")
+
+
 def comparison_lines(c: Comparison) -> list[str]:
     """The paired differences that decide the ranking, each with its interval, and McNemar's count."""
     diff = f"{c.names[1]} - {c.names[0]}"
@@ -73,10 +90,26 @@ def comparison_lines(c: Comparison) -> list[str]:
             f"for both in {t['both']} (McNemar p = {t['p_value']:.3g})."]
 
 
+def stop_line(walk) -> str:
+    """Where the agent stopped (the navigation estimate), in a few words."""
+    if walk.outcome == "not found":
+        return f"the agent never stops: {walk.d2g:.1f} m from the target at the walk's end"
+    return f"the agent stops at step {walk.stop_step}: {walk.outcome}, {walk.d2g:.2f} m from the target"
+
+
+def stops(run: BenchRun, matcher: str) -> dict[str, object]:
+    """Each val episode's stop (``navigation.episodes_at``) by episode id; none without the frame-set's geometry."""
+    if run.frameset.navigation_missing is not None:
+        return {}
+    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher])
+    return {w.episode_id: w for w in walks.itertuples()}
+
+
 def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
-    """Per val episode: the target's references, then each matcher's first frame above its sigma."""
+    """Per val episode: the target's references, then each matcher's first frame above its sigma, and where the
+    agent would stop (where the frame-set has geometry)."""
     run = s.bench.run
-    firsts = {}
+    firsts, walks = {}, {m: stops(run, m) for m in run.matchers}
     for m in run.matchers:
         first = first_matches(run.scored(m, "val"), run.sigmas[m])
         firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
@@ -87,14 +120,15 @@ def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODE
         figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
                                                                   f"target {target.object_id} ({target.category})"])]
         for m in run.matchers:
+            stop = [stop_line(walks[m][ep.episode_id])] if ep.episode_id in walks[m] else []
             if ep.episode_id not in firsts[m].index:
-                figures.append(html.figure([], [f"{m}: no frame above sigma {run.sigmas[m]:g}"], "miss"))
+                figures.append(html.figure([], [f"{m}: no frame above sigma {run.sigmas[m]:g}", *stop], "miss"))
                 continue
             f = firsts[m].loc[ep.episode_id]
             image = scored_frame_image(assets, run.frameset, run.tables[m], f.frame_id, run.sigmas[m],
                                        box=PICTURE_SIZE)
             figures.append(html.figure([image], [f"{m}: first match at step {f.step}", f"shows: {f.role}",
-                                                 f"score {f.score:.3g} (sigma {run.sigmas[m]:g})"],
+                                                 f"score {f.score:.3g} (sigma {run.sigmas[m]:g})", *stop],
                                        "hit" if f.role == "target" else "miss"))
         parts.append(html.gallery(figures))
     return parts
@@ -104,6 +138,9 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
     n_val = int((s.bench.run.frameset.episodes.split == "val").sum())
     shown = min(n_val, EPISODES_SHOWN)
     parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results))]
+    navigation = navigation_line(s.bench.results)
+    if navigation:
+        parts.append(html.paragraph(navigation))
     if s.comparisons:
         parts += [html.heading("Paired comparison", 3),
                   *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]

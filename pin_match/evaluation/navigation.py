@@ -177,7 +177,8 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
     heading = math.atan2(ahead[1], ahead[0])
     turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
     distance = float(np.hypot(*ahead))
-    steps = int(places.steps[t]) + round(turn / TURN) + math.ceil(distance / FORWARD_STEP) + 1
+    turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
+    steps = int(places.steps[t]) + turns + math.ceil(distance / FORWARD_STEP) + 1
     path = float(places.walked[t]) + distance
     geodesic = geometry.geodesic_distance
     spl = float(outcome == "success") * geodesic / max(path, geodesic) if max(path, geodesic) > 0 else 0.0

@@ -1,4 +1,4 @@
-"""One matcher's report folder at one sigma: metrics.json, per_category.csv, the paper's tables, plots.
+"""One matcher's report folder at one sigma: metrics.json, per_category.csv, sizes.csv, the paper's tables, plots.
 
 ``report`` only assembles: sigma comes from ``pin_match.evaluation.sigma``, numbers from
 ``pin_match.evaluation``, tables from ``pin_match.evaluation.tables``, figures from ``pin_match.evaluation.plots``,
@@ -14,7 +14,7 @@ from pathlib import Path
 
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.evaluator import EvalContext, evaluate
+from pin_match.evaluation.evaluator import EvalContext, evaluate, table_subset
 from pin_match.evaluation.layout import ReportFiles
 from pin_match.evaluation.navigation import navigation_sweep, sweep_sigmas
 from pin_match.evaluation.plots import (
@@ -25,6 +25,7 @@ from pin_match.evaluation.plots import (
 )
 from pin_match.evaluation.report_page import write_report_page
 from pin_match.evaluation.sigma import SigmaChoice, resolve_sigma
+from pin_match.evaluation.sizes import best_point_hits, readable, size_table
 from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tables import latex_table, markdown_table, report_tables
 from pin_match.scoring.table import ScoreTable
@@ -49,9 +50,14 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     files = ReportFiles.in_folder(out_dir)
     atomic.write_text(files.per_category, evaluation.per_category.to_csv(index_label="category"))
     overall, per_cat = report_tables(result, evaluation.per_category)
+    hits = best_point_hits(table_subset(table, evaluation.frames.frame_id).frames, ctx.fs.visibility,
+                           ctx.fs.instance_mask)
+    sizes = size_table(evaluation.frames, ctx.fs.visibility, choice.value, hits)
+    atomic.write_text(files.sizes, sizes.assign(sigma=choice.value, sigma_source=choice.source).to_csv())
     title = f"{table.matcher_id}, split {result['split']}, sigma = {choice.value:g} ({choice.source})"
     atomic.write_text(files.markdown, f"# {title}\n\nsigma: {choice.detail}\n\n{markdown_table(overall)}\n\n"
-                                      f"## Per target category\n\n{markdown_table(per_cat)}\n")
+                                      f"## Per target category\n\n{markdown_table(per_cat)}\n\n"
+                                      f"## By the objects' size (pixels)\n\n{markdown_table(readable(sizes))}\n")
     atomic.write_text(files.latex, latex_table(overall, caption=f"{title}.") + "\n"
                       + latex_table(per_cat, caption=f"{title}, per target category.") + "\n")
     plot_sigma_curves(sweep(evaluation.arrays), choice.value, files.sigma_curves, title)

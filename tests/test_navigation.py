@@ -1,0 +1,321 @@
+"""The navigation estimate (SR, SPL, CE, D2G, Steps) on hand-built geometry, the renderer's own, and a PIN recording."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from conftest import make_view
+from pin_match.data.frameset import FrameSet
+from pin_match.data.geometry import CameraModel, EpisodeGeometry, GeometryError, Pose, back_project
+from pin_match.data.writer import Frame, FrameSetWriter
+from pin_match.evaluation import EvalContext, evaluate, report, tune
+from pin_match.evaluation.navigation import NavigationError, episodes_at, metrics_of, navigation_metrics
+from pin_match.evaluation.sigma import SigmaChoice
+from pin_match.evaluation.tables import report_row, side_by_side
+from pin_match.evaluation.tuning import TuningError
+from pin_match.scoring.table import ScoreTable
+
+SIZE = 40  # square frames, HFOV 90 degrees: focal 20 px, the centre pixel (20, 20) looks straight ahead
+CENTRE = (20.0, 20.0)
+TARGET, LOOKALIKE, OTHER = (3.0, 0.0, 1.0), (-3.0, 3.0, 1.0), (-6.0, 0.0, 1.0)
+# per step: camera position (x, y), yaw, what it looks at and how far (the object at the frame's centre)
+WALK = [((-3.0, 0.0), 0.0, "mug_t", 6.0),  # the target, beyond PIN's 5 m depth: a match here cannot be placed
+        ((-3.0, 0.0), math.pi / 2, "mug_l", 3.0),  # the look-alike
+        ((-3.0, 0.0), math.pi, "ball_o", 3.0),  # another object
+        ((-3.0, 0.0), 0.0, "mug_t", 6.0),
+        ((0.0, 0.0), 0.0, "mug_t", 3.0),  # the target 3 m ahead
+        ((1.0, 0.0), 0.0, "mug_t", 2.0)]
+GEODESIC = 6.0
+
+
+@pytest.fixture(scope="module")
+def walk_set(tmp_path_factory) -> FrameSet:
+    """One val episode: a camera 1 m high turning on the spot, then walking at the target; every object 1 m high,
+    seen at the frame's centre against a wall as far as it."""
+    w = FrameSetWriter(tmp_path_factory.mktemp("nav") / "walk", camera=CameraModel(90.0))
+    for oid, category, colour in (("mug_t", "mug", (200, 30, 30)), ("mug_l", "mug", (30, 30, 200)),
+                                  ("ball_o", "ball", (30, 200, 30))):
+        w.add_object(oid, category, "val", [make_view(colour)] * 3, [f"{oid} {k}" for k in range(3)])
+    w.add_episode("e", "val", "house", "mug_t", ["mug_l", "ball_o"],
+                  EpisodeGeometry(Pose(-3.0, 0.0, 0.0, 0.5), GEODESIC,  # the start heading: turned from at once
+                                  {"mug_t": TARGET, "mug_l": LOOKALIKE, "ball_o": OTHER}, {"mug_t": GEODESIC}))
+    roles = w.roles("e")
+    for step, ((x, y), yaw, oid, distance) in enumerate(WALK):
+        mask = np.zeros((SIZE, SIZE), np.uint16)
+        mask[18:23, 18:23] = 1
+        depth = np.full((SIZE, SIZE), distance, np.float32)  # a wall at the object's distance behind it
+        w.write_frame("e", step, Frame(np.full((SIZE, SIZE, 3), 90, np.uint8), mask, {1: (oid, roles[oid])}, depth,
+                                       Pose(x, y, 1.0, yaw)))
+    return w.close()
+
+
+def table_of(fs: FrameSet, scores: list[float], points=None) -> ScoreTable:
+    """A score table of ``walk_set``: one score a step, its points (default: the frame's centre) carrying it."""
+    points = points or [(CENTRE,)] * len(WALK)
+    rows = [dict(frame_id=f"e_{step:04d}", episode_id="e", step=step, split="val", score=s, crop_scores=[s],
+                 points_x=[p[0] for p in pts], points_y=[p[1] for p in pts], point_scores=[s] * len(pts))
+            for step, (s, pts) in enumerate(zip(scores, points))]
+    return ScoreTable(pd.DataFrame(rows), dict(matcher="hand", matcher_id="hand@0",
+                                               frameset_fingerprint=fs.fingerprint))
+
+
+def stop_of(fs: FrameSet, scores: list[float], sigma: float = 0.5, **kw) -> pd.Series:
+    table = table_of(fs, scores, **kw)
+    return episodes_at(EvalContext(fs).placements(table, "val"), sigma).iloc[0]
+
+
+def test_a_match_on_the_target_3_m_ahead_is_a_success(walk_set):
+    # steps 0 and 3 also match the target, but 6 m away: no depth in PIN's range, so the agent walks on
+    stop = stop_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9])
+    assert stop.outcome == "success" and stop.stop_step == 4 and stop.unplaced_firings == 2
+    assert stop.landed_on == "target"
+    np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], TARGET, atol=1e-9)
+    assert stop.d2g == pytest.approx(0.0, abs=1e-9)
+    assert stop.steps == 4 + 0 + 12 + 1  # the 4 actions walked, no turn, 3 m in 0.25 m steps, stop
+    assert stop.path == pytest.approx(3.0 + 3.0) and stop.spl == pytest.approx(1.0)  # 6 m walked = the geodesic
+
+
+def test_a_match_on_the_lookalike_is_a_category_error(walk_set):
+    stop = stop_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.2, 0.2])
+    assert stop.outcome == "category error" and stop.stop_step == 1 and stop.landed_on == "same_category"
+    assert stop.d2g == pytest.approx(math.hypot(6.0, 3.0))
+    assert stop.steps == 1 + 0 + 12 + 1 and stop.spl == 0.0
+
+
+def test_a_match_elsewhere_is_neither_success_nor_category_error(walk_set):
+    stop = stop_of(walk_set, [0.0, 0.0, 0.9, 0.0, 0.0, 0.0])
+    assert stop.outcome == "other stop" and stop.landed_on == "other" and stop.d2g == pytest.approx(9.0)
+
+
+def test_no_match_is_not_found_with_d2g_at_the_walks_end(walk_set):
+    stop = stop_of(walk_set, [0.1] * len(WALK))
+    assert stop.outcome == "not found" and stop.stop_step is None and stop.unplaced_firings == 0
+    assert stop.d2g == pytest.approx(2.0)  # the last pose (1, 0, 1 m high) to the target (3, 0, 1)
+    assert stop.steps == 5 and stop.path == pytest.approx(4.0) and stop.spl == 0.0
+
+
+def test_turns_and_steps_to_a_point_off_the_axis(walk_set):
+    # the left edge of step 4's frame at 3 m: 3 m ahead and 3 m to the left, 45 degrees off the heading
+    points = [(CENTRE,)] * 4 + [((0.0, 20.0),)] + [(CENTRE,)]
+    stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], points=points)
+    np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], (3.0, 3.0, 1.0), atol=1e-9)
+    assert stop.outcome == "other stop" and stop.landed_on == "background"
+    assert stop.steps == 4 + 1 + math.ceil(math.hypot(3, 3) / 0.25) + 1  # one turn leaves 15 degrees
+
+
+def test_metrics_are_shares_of_episodes_and_means(walk_set):
+    ctx = EvalContext(walk_set)
+    rows = [episodes_at(ctx.placements(table_of(walk_set, s), "val"), 0.5)
+            for s in ([0.0, 0.0, 0.0, 0.0, 0.9, 0.9], [0.0, 0.9, 0.0, 0.0, 0.0, 0.0], [0.0] * 6)]
+    walks = pd.concat(rows, ignore_index=True).assign(episode_id=["a", "b", "c"])
+    m = metrics_of(walks)
+    assert m["sr"] == pytest.approx(100 / 3) and m["ce"] == pytest.approx(100 / 3)
+    assert m["not_found_pct"] == pytest.approx(100 / 3) and m["spl"] == pytest.approx(100 / 3)
+    assert m["d2g"] == pytest.approx((0.0 + math.hypot(6, 3) + 2.0) / 3)
+    assert m["steps"] == pytest.approx((17 + 14 + 5) / 3)
+    ci = navigation_metrics(walks)["ci95"]
+    assert ci["sr"][0] <= m["sr"] <= ci["sr"][1] and ci["sr"] != [m["sr"], m["sr"]]
+
+
+def test_evaluate_report_and_tables_carry_the_estimate(walk_set, tmp_path):
+    table = table_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9])
+    result = report(table, walk_set, tmp_path / "report", sigma=SigmaChoice(0.5, "given", "test"))
+    assert result["metrics"]["sr"] == 100.0 and result["metrics"]["steps"] == 17.0
+    assert result["navigation"]["outcomes"] == {"success": 1, "category error": 0, "other stop": 0, "not found": 0}
+    assert {"navigation", "navigation_curves"} <= set(result["files"])
+    saved = pd.read_csv(result["files"]["navigation"])
+    assert list(saved.outcome) == ["success"] and saved.point_frame_id.iloc[0] == "e_0004"
+    assert list(side_by_side([report_row(result)]).columns[2:8]) == ["SR", "SPL", "CE", "D2G", "Steps", "Not found"]
+    page = (tmp_path / "report" / "report.html").read_text()
+    assert "What the agent would do" in page and "episode e: success" in page
+
+
+def test_sigma_tuned_for_sr_sees_what_first_match_cannot(walk_set):
+    # the target 6 m away scores highest: the first-match objective takes 0.95 (the first match shows the target),
+    # but the agent cannot place a match without depth and never stops there; SR takes 0.9 (the target at 3 m)
+    table = table_of(walk_set, [0.95, 0.85, 0.0, 0.0, 0.9, 0.9])
+    by_sr, by_first = tune(table, walk_set, objective="sr", split="val"), tune(table, walk_set, split="val")
+    assert by_sr["sigma"] == 0.9 and by_sr["metrics_at_sigma"]["sr"] == 100.0
+    assert by_first["sigma"] == 0.95 and by_first["metrics_at_sigma"]["first_match_success"] == 100.0
+    assert by_first["metrics_at_sigma"]["sr"] == 0.0 and by_first["metrics_at_sigma"]["not_found_pct"] == 100.0
+
+
+def test_a_frameset_without_geometry_says_why(tiny_frameset):
+    rows = [dict(frame_id=f, episode_id=e, step=s, split=sp, score=0.5, crop_scores=[0.5], points_x=[1.0],
+                 points_y=[1.0], point_scores=[0.5])
+            for f, e, s, sp in tiny_frameset.frames[["frame_id", "episode_id", "step", "split"]].itertuples(False)]
+    table = ScoreTable(pd.DataFrame(rows), dict(matcher="hand", matcher_id="hand@0",
+                                                frameset_fingerprint=tiny_frameset.fingerprint))
+    result = evaluate(table, tiny_frameset, SigmaChoice(0.5, "given", "test")).result
+    assert "records no geometry" in result["navigation"]["missing"] and "sr" not in result["metrics"]
+    assert "SR" not in side_by_side([report_row(result)]).columns
+    with pytest.raises(NavigationError, match="records no geometry"):
+        EvalContext(tiny_frameset).placements(table, "val")
+    with pytest.raises(TuningError, match="needs the navigation estimate"):
+        tune(table, tiny_frameset, objective="sr", split="val")
+
+
+def test_bad_geometry_is_a_named_error(walk_set, tmp_path):
+    with pytest.raises(GeometryError, match="not finite"):
+        Pose(0.0, float("nan"), 1.0, 0.0)
+    with pytest.raises(GeometryError, match="negative"):
+        w = FrameSetWriter(tmp_path / "neg")
+        w.add_object("o", "mug", "val", [make_view((1, 2, 3))] * 3, ["a", "b", "c"])
+        w.add_episode("e", "val", "s", "o", [])
+        w.add_frame("e", 0, np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint16), {},
+                    np.full((4, 4), -1.0, np.float32))
+    copy = tmp_path / "nan"
+    import shutil
+
+    shutil.copytree(walk_set.root, copy)
+    frames = pd.read_parquet(copy / "frames.parquet")
+    frames.loc[2, "pose_yaw"] = np.nan
+    frames.to_parquet(copy / "frames.parquet")
+    with pytest.raises(GeometryError, match=r"frame 'e_0002' has a non-finite camera pose"):
+        FrameSet.load(copy)
+
+
+def test_a_writer_with_a_camera_needs_every_episodes_geometry(tmp_path):
+    w = FrameSetWriter(tmp_path / "half", camera=CameraModel(42.0))
+    w.add_object("o", "mug", "val", [make_view((1, 2, 3))] * 3, ["a", "b", "c"])
+    w.add_episode("e", "val", "s", "o", [])
+    w.write_frame("e", 0, Frame(np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint16), {}, None,
+                                Pose(0.0, 0.0, 1.0, 0.0)))
+    with pytest.raises(GeometryError, match="episode 'e' has no geometry"):
+        w.close()
+
+
+def test_a_rendered_pixel_lands_inside_its_object(tmp_path):
+    """The renderer's own depth and pose: every pixel of a box, back-projected, lies inside the box."""
+    from pin_match.data.synth.generate import HFOV, _camera
+    from pin_match.data.synth.render import Light, Renderer, vertical_fov
+    from pin_match.data.synth.shapes import box
+    from pin_match.data.synth.walk import CAMERA_HEIGHT
+
+    renderer = Renderer()
+    try:
+        centre, size = np.array([2.0, 0.7, 0.8]), np.array([0.3, 0.4, 0.5])
+        body = renderer.add(box(*size), np.full((8, 8, 3), 200, np.uint8), tuple(centre))
+        pose = (0.0, 0.0, 0.3, -0.2)  # x, y, yaw, pitch: the box ahead, left of the axis and below it
+        width, height = 180, 320
+        _, ids, depth = renderer.render(_camera(pose), width, height, vertical_fov(HFOV, width, height), Light())
+    finally:
+        renderer.close()
+    ys, xs = np.nonzero(ids == body)
+    assert len(xs) > 500
+    camera = CameraModel(HFOV)
+    points = back_project(Pose(0.0, 0.0, CAMERA_HEIGHT, 0.3, -0.2), camera.focal_px(width), (width / 2, height / 2),
+                          np.stack([xs + 0.5, ys + 0.5], 1), depth[ys, xs])
+    outside = np.abs(points - centre) - size / 2
+    assert outside.max() < 0.01, f"a back-projected pixel lies {outside.max():.3f} m outside the box"
+
+
+def test_the_synthetic_generator_records_geometry(tmp_path):
+    from pin_match.data.synth import SynthSize
+    from pin_match.data.synth.generate import generate
+    from pin_match.data.synth.scene import LOOKALIKE_GAP
+
+    fs = generate(tmp_path / "s", SynthSize(seed=2, episodes=2, objects_per_family=3, frames_per_episode=8), workers=1)
+    g = fs.geometry
+    assert g is not None and fs.navigation_missing is None and g.camera.hfov_deg == 42.0
+    for record in fs.episode_records:
+        e = g.episodes[record["episode_id"]]
+        target = record["goals"][0]["object_id"]
+        assert e.geodesic_distance == e.geodesic_to[target] > 0
+        first = g.pose(f"{record['episode_id']}_0000")
+        assert (e.start.x, e.start.y, e.start.yaw) == (first.x, first.y, first.yaw)
+        for d in record["distractors"]:
+            if d["object_category"] == record["goals"][0]["object_category"]:
+                gap = np.hypot(*(np.subtract(e.positions[d["object_id"]], e.positions[target])[:2]))
+                assert gap >= LOOKALIKE_GAP and d["object_id"] in e.geodesic_to
+    # the target's pixels, back-projected, lie near its centre
+    vis = fs.visibility[(fs.visibility.role == "target") & (fs.visibility.pixels > 200)]
+    for row in vis.head(5).itertuples():
+        mask, depth = fs.instance_mask(row.frame_id) == row.mask_value, fs.depth(row.frame_id)
+        ys, xs = np.nonzero(mask & (depth > 0))
+        points = g.back_project(row.frame_id, np.stack([xs + 0.5, ys + 0.5], 1), depth[ys, xs])
+        episode = row.frame_id.rsplit("_", 1)[0]
+        centre = np.asarray(g.episodes[episode].positions[row.object_id])
+        assert np.median(np.linalg.norm(points - centre, axis=1)) < 0.3
+
+
+# ---------------------------------------------------------------------- a PIN recording carries the same geometry
+WORLD_OFFSET = np.array([10.0, 0.2, -4.0])  # Habitat's world: y up; where the house frame's origin lies in it
+
+
+def to_habitat(xyz) -> list[float]:
+    """A house-frame point (x, y on the floor, z up) in a Habitat world (x right, y up, z back) rotated and moved."""
+    x, y, z = xyz
+    return list(np.array([-y, z, -x]) + WORLD_OFFSET)
+
+
+def pin_episode(fs: FrameSet, record: dict) -> dict:
+    """The episode as PIN's Habitat episode holds it: world positions, start rotation [x, y, z, w], geodesic."""
+    g = fs.geometry.episodes[record["episode_id"]]
+    yaw = g.start.yaw  # the agent looks along -z rotated about y by yaw: house heading yaw
+    goal = dict(record["goals"][0], position=to_habitat(g.positions[record["goals"][0]["object_id"]]))
+    distractors = [dict(d, position=to_habitat(g.positions[d["object_id"]])) for d in record["distractors"]]
+    return dict(episode_id=record["episode_id"], scene_id=record["scene_id"], split=record["split"], goals=[goal],
+                distractors=distractors, start_position=to_habitat((g.start.x, g.start.y, 0.0)),
+                start_rotation=[0.0, math.sin(yaw / 2), 0.0, math.cos(yaw / 2)],
+                info={"geodesic_distance": g.geodesic_distance})
+
+
+def agent_sensors(fs: FrameSet, frame_id: str, start: Pose) -> tuple[dict, float]:
+    """PIN's gps ([forward, right] from the start, in the start's heading) and compass, and the camera pitch."""
+    pose = fs.geometry.pose(frame_id)
+    dx, dy = pose.x - start.x, pose.y - start.y
+    c, s = math.cos(start.yaw), math.sin(start.yaw)
+    forward, left = c * dx + s * dy, -s * dx + c * dy
+    return dict(gps=np.array([forward, -left], np.float32), compass=np.array([pose.yaw - start.yaw])), pose.pitch
+
+
+def test_a_pin_recording_yields_the_same_navigation_columns(walk_set, tmp_path):
+    from pin_match.data.importer import import_recording
+    from pin_match.pin_agent import FrameRecorder
+
+    recorder = FrameRecorder(tmp_path / "rec", hfov_deg=90.0, camera_height=1.0)
+    for record in walk_set.episode_records:
+        start = walk_set.geometry.episodes[record["episode_id"]].start
+        with recorder.episode(pin_episode(walk_set, record)):
+            for fid in walk_set.frames.sort_values("step").frame_id:
+                sensors, pitch = agent_sensors(walk_set, fid, start)
+                mask = walk_set.instance_mask(fid)
+                semantic = np.where(mask == 1, {"target": 100000, "same_category": 100001, "other": 100002}[
+                    walk_set.visibility[walk_set.visibility.frame_id == fid].role.iloc[0]], 0).astype(np.int32)
+                recorder.record(dict(rgb=walk_set.image(fid), semantic=semantic, depth=walk_set.depth(fid), **sensors),
+                                camera_pitch=pitch)
+    imported = import_recording(tmp_path / "rec", walk_set.root, tmp_path / "imported")
+    assert imported.geometry is not None and imported.geometry.camera.hfov_deg == 90.0
+    for scores in ([0.9, 0.0, 0.0, 0.9, 0.9, 0.9], [0.0, 0.9, 0.0, 0.0, 0.2, 0.2], [0.1] * len(WALK)):
+        want = stop_of(walk_set, scores)
+        got = stop_of(imported, scores)
+        assert got.outcome == want.outcome and got.steps == want.steps and got.landed_on == want.landed_on
+        for key in ("d2g", "path", "spl"):
+            assert got[key] == pytest.approx(want[key], abs=1e-5), key
+
+
+def test_a_recording_with_poses_in_some_episodes_only_is_refused(walk_set, tmp_path):
+    from pin_match.data.importer import import_recording
+    from pin_match.pin_agent import FrameRecorder
+    from pin_match.pin_agent.recorder import RecordingError
+
+    recorder = FrameRecorder(tmp_path / "rec")
+    for k, with_pose in enumerate((True, False)):
+        record = dict(pin_episode(walk_set, walk_set.episode_records[0]), episode_id=f"e{k}")
+        with recorder.episode(record):
+            sensors = dict(gps=[0.0, 0.0], compass=[0.0]) if with_pose else {}
+            recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32),
+                                 **sensors))
+    with pytest.raises(GeometryError, match="episode 'e0' recorded the agent's poses .* episode 'e1' did not"):
+        import_recording(tmp_path / "rec", walk_set.root, tmp_path / "out")
+    recorder = FrameRecorder(tmp_path / "rec2")
+    with recorder.episode(dict(pin_episode(walk_set, walk_set.episode_records[0]), episode_id="x")):
+        recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32),
+                             gps=[0.0, 0.0], compass=[0.0]))
+        with pytest.raises(RecordingError, match="no gps or compass, which earlier steps had"):
+            recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32)))
