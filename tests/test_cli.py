@@ -224,8 +224,9 @@ def test_demo_loads_the_frameset_once_and_prints_where_the_time_went(tiny_frames
 
 
 def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frameset, tmp_path, capsys):
-    """The last line printed is the path of one index.html: both tables, each report, each compare page; the
-    scanned set (the demo folder itself) first, the real look-alikes (``lookalikes/``) second."""
+    """The last line printed is the path of one index.html: both tables, each report, each compare page; the real
+    look-alikes (``lookalikes/``) first, where recognition can be measured, the scanned set (the demo folder itself)
+    second."""
     import shutil
 
     from markupsafe import escape
@@ -238,20 +239,20 @@ def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frame
     index = Path(capsys.readouterr().out.strip().splitlines()[-1].split(": ")[-1])
     assert index == tmp_path / "demo" / "index.html"
     text = index.read_text(encoding="utf-8")
-    assert re.findall(r'<a href="([^"]+)"', text) == [  # the scanned set first, then the real photos
-        "reports/color/report.html", "reports/sift/report.html", "compare/sift_vs_color/compare.html",
+    assert re.findall(r'<a href="([^"]+)"', text) == [  # the real photos first, then the scanned set
         "lookalikes/reports/color/report.html", "lookalikes/reports/sift/report.html",
-        "lookalikes/compare/sift_vs_color/compare.html"]
+        "lookalikes/compare/sift_vs_color/compare.html",
+        "reports/color/report.html", "reports/sift/report.html", "compare/sift_vs_color/compare.html"]
     assert all((index.parent / href).is_file() for href in re.findall(r'<a href="([^"]+)"', text))
     assert text.count("<table>") == 2
-    captions = [text.index(escape(c)) for c in (SCANNED.caption, LOOKALIKES.caption)]
+    captions = [text.index(escape(c)) for c in (LOOKALIKES.caption, SCANNED.caption)]
     assert captions[0] < captions[1] < text.index("Reports and comparisons")
     assert "scanned products" in SCANNED.caption and LOOKALIKES.caption.startswith("real photos")
 
 
 def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
-    """After the scanned set (here the copied tiny set, kept: it records no seed) the demo builds the real
-    look-alikes under ``lookalikes/`` and prints their table second."""
+    """Beside the scanned set (here the copied tiny set, kept: it records no seed) the demo builds the real
+    look-alikes under ``lookalikes/`` and prints their table first."""
     import shutil
 
     from pin_match.evaluation.demo import LOOKALIKES, SCANNED
@@ -261,8 +262,8 @@ def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
                  "--workers", "1", "--quiet"]) == 0
     out = capsys.readouterr().out
     assert f"on {SCANNED.caption};" in out and f"on {LOOKALIKES.caption};" in out
-    assert out.index("scanned products") < out.index("real photos: val instances of CORe50 objects")
-    real = out[out.index("real photos"):out.index("reports, plots")]
+    assert out.index("real photos: val instances of CORe50 objects") < out.index("scanned products")
+    real = out[out.index("real photos"):out.index(f"PIN metrics on {SCANNED.caption}")]
     assert "AUROC-same" in real and "color@" in real and "n/a" not in real.split("\n| color@")[1].split("\n")[0]
     assert "load frame-set (scanned look-alikes)" in out and "build frame-set (scanned look-alikes)" not in out
     assert "build frame-set (look-alikes)" in out and "score color (look-alikes, " in out

@@ -85,7 +85,7 @@ def test_frameset_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
 
 def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
     """The demo's index.html (headline, paired comparison, each matcher's first match drawn, links) in the demo's
-    order: the scanned set (the demo folder itself) first, the real look-alikes (``lookalikes/``) second; both
+    order: the real look-alikes (``lookalikes/``) first, the scanned set (the demo folder itself) second; both
     sets are the tiny one here, so that nothing is rendered."""
     import shutil
     from dataclasses import replace
@@ -99,15 +99,15 @@ def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
         shutil.copytree(tiny_frameset.root, out)
         return type(tiny_frameset).load(out)
 
-    sets = [replace(SCANNED, build=copy, matchers=("color", "sift")), replace(LOOKALIKES, build=copy,
-                                                                              matchers=("color",))]
+    sets = [replace(LOOKALIKES, build=copy, matchers=("color",)),
+            replace(SCANNED, build=copy, matchers=("color", "sift"))]
     results = demo(tmp_path / "demo", sets, run=RunOptions(workers=1, progress=False))
-    assert [r.name for r in results] == ["scanned look-alikes", "look-alikes"]
-    assert [len(r.comparisons) for r in results] == [1, 0]
+    assert [r.name for r in results] == ["look-alikes", "scanned look-alikes"]
+    assert [len(r.comparisons) for r in results] == [0, 1]
     index = tmp_path / "demo" / "index.html"
     text = index.read_text(encoding="utf-8")
-    assert text.index(escape(SCANNED.caption)) < text.index(escape(LOOKALIKES.caption))
-    assert re.findall(r'<a href="([^"]+)"', text) == ["reports/color/report.html", "reports/sift/report.html",
-                                                       "compare/sift_vs_color/compare.html",
-                                                       "lookalikes/reports/color/report.html"]
+    assert text.index(escape(LOOKALIKES.caption)) < text.index(escape(SCANNED.caption))
+    assert re.findall(r'<a href="([^"]+)"', text) == ["lookalikes/reports/color/report.html",
+                                                       "reports/color/report.html", "reports/sift/report.html",
+                                                       "compare/sift_vs_color/compare.html"]
     check_page(browser, index, "index.png")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from pin_match import outputs
 from pin_match.cli.args import (
@@ -25,6 +26,11 @@ from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.scoring.cache import cache_dir
 from pin_match.scoring.table import ScoreTable
+
+if TYPE_CHECKING:
+    from pin_match.contract.matcher import Matcher
+    from pin_match.evaluation.carry import ScoredSet
+    from pin_match.evaluation.stop import StopPolicy
 
 WORKERS_HELP = ("worker processes/threads (default: up to 2 for scoring, all cores for rendering); with "
                 "--scheduler local, the Dask worker processes that score")
@@ -126,9 +132,9 @@ def _cmd_demo(a: argparse.Namespace) -> None:
             if not (a.no_lookalikes and s is LOOKALIKES)]
     watch = Stopwatch()
     with engine_run(a) as run:
-        results = demo(a.out, sets, seed=a.seed, run=run, watch=watch)
+        results = demo(a.out, sets, seed=a.seed, run=run, watch=watch, tune=a.tune)
     for r in results:
-        print(f"\nPIN detection metrics on {r.caption}; {r.bench.caption}\n")
+        print(f"\nPIN metrics on {r.caption}; {r.bench.caption}\n")
         print(markdown_table(r.bench.joint))
     print(f"\nreports, plots, thresholds and score tables: {a.out}")
     print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")
@@ -136,18 +142,17 @@ def _cmd_demo(a: argparse.Namespace) -> None:
 
 
 def _cmd_carry(a: argparse.Namespace) -> None:
-    import pandas as pd
-
     from pin_match import atomic
     from pin_match.contract.registry import create_matcher
-    from pin_match.evaluation.carry import ScoredSet, chosen_and_carried, headline, leave_one_out
+    from pin_match.evaluation.carry import ScoredSet
     from pin_match.evaluation.evaluator import EvalContext
     from pin_match.evaluation.metrics import Bootstrap
     from pin_match.scoring import score_many
 
     if len(a.framesets) < 2:
         raise UsageError(f"carry needs at least two frame-sets (one is left out at a time), got {a.framesets}")
-    variants = {label: create_matcher(a.matcher, **cfg) for label, cfg in _variants(a).items()}
+    configs = {label: create_matcher(a.matcher, **cfg) for label, cfg in _variants(a).items()}
+    policies = _policies(a)
     contexts = {}  # every frame-set loaded and its split checked before anything is scored
     for item in a.framesets:
         path, _, split = item.partition(":")
@@ -156,32 +161,69 @@ def _cmd_carry(a: argparse.Namespace) -> None:
         reading = split or ("val" if "val" in splits else None)
         ctx.fs.split(reading)  # a split the set lacks is named here
         contexts[item] = (ctx, "train" if "train" in splits else None, reading)
-    scored: dict[str, dict[str, ScoredSet]] = {label: {} for label in variants}
+    scored: dict[str, dict[str, ScoredSet]] = {label: {} for label in configs}
     with engine_run(a) as run:
         for item, (ctx, tuning, reading) in contexts.items():  # the variants in one pass: a shared part runs once
-            tables = score_many(ctx.fs, list(variants.values()), out=a.cache, run=run)
-            for label, table in zip(variants, tables):
+            tables = score_many(ctx.fs, list(configs.values()), out=a.cache, run=run)
+            for label, table in zip(configs, tables):
+                places = ctx.placements(table, reading) if ctx.fs.navigation_missing is None else None
                 scored[label][item] = ScoredSet(tuning=ctx.scored(table, tuning), reading=ctx.scored(table, reading),
-                                                clusters=ctx.clusters)
-    boot = Bootstrap(n_boot=a.bootstrap)
-    columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
-               "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",
-               "success_gap"]
-    report: dict = dict(matcher=a.matcher, variants={label: m.id for label, m in variants.items()}, rows={})
-    with pd.option_context("display.width", 200, "display.max_colwidth", 60):
-        for label, sets in scored.items():
-            rows = leave_one_out(sets, boot)
-            report["rows"][label] = dict(headline(rows), rows=rows.to_dict("records"))
-            print(f"{variants[label].id} ({label}): sigma chosen on every other set, read on the set (worst first)\n"
-                  + rows[columns].round(3).to_string(index=False) + "\n")
-        if len(variants) > 1:
-            rows = chosen_and_carried(scored, boot)
-            report["chosen"] = dict(headline(rows), rows=rows.to_dict("records"))
-            print(f"{a.vary.split('=')[0]} chosen on the other sets alone, then sigma on them, read on the set "
-                  "(worst first)\n" + rows[["variant", *columns]].round(3).to_string(index=False))
+                                                clusters=ctx.clusters, placements=places)
+    variants = {_variant_label(c, p, len(configs), a.policy): (c, p) for c in configs for p in policies}
+    report = _carry_report(a, configs, scored, variants)
     if a.json:
         atomic.write_json(a.json, report)
         print(f"-> {a.json}")
+
+
+def _carry_report(a: argparse.Namespace, configs: dict[str, Matcher], scored: dict[str, dict[str, ScoredSet]],
+                  variants: dict[str, tuple[str, StopPolicy]]) -> dict:
+    """Print each variant's leave-one-set-out rows, then (several variants) the variant chosen without each set;
+    return what ``--json`` writes."""
+    import pandas as pd
+
+    from pin_match.evaluation.carry import chosen_and_carried, headline, leave_one_out
+    from pin_match.evaluation.metrics import Bootstrap
+
+    boot = Bootstrap(n_boot=a.bootstrap)
+    walks = any(s.placements is not None for sets in scored.values() for s in sets.values())
+    columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
+               "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",
+               "success_gap", *(["sr", "ce", "own_sr", "own_ce"] if walks else [])]
+    report: dict = dict(matcher=a.matcher, variants={label: configs[c].id for label, (c, _) in variants.items()},
+                        policies={label: str(p) for label, (_, p) in variants.items()}, rows={})
+    with pd.option_context("display.width", 250, "display.max_colwidth", 60):
+        for label, (config, policy) in variants.items():
+            rows = leave_one_out(scored[config], boot, policy)
+            report["rows"][label] = dict(headline(rows), rows=rows.to_dict("records"))
+            print(f"{configs[config].id} ({label}): sigma chosen on every other set, read on the set (worst first)\n"
+                  + rows[columns].round(3).to_string(index=False) + "\n")
+        if len(variants) > 1:
+            rows = chosen_and_carried({label: scored[c] for label, (c, _) in variants.items()}, boot,
+                                      {label: p for label, (_, p) in variants.items()})
+            report["chosen"] = dict(headline(rows), rows=rows.to_dict("records"))
+            varied = " and ".join([*([a.vary.split("=")[0]] if a.vary else []), *(["stop policy"] if a.policy else [])])
+            print(f"{varied} chosen on the other sets alone, then sigma on them, read on the set (worst first)\n"
+                  + rows[["variant", *columns]].round(3).to_string(index=False))
+    return report
+
+
+def _policies(a: argparse.Namespace) -> list[StopPolicy]:
+    """The stop policies of ``--policy`` (each value a comma-separated list; default PIN's rule), in order."""
+    from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy
+
+    texts = [t.strip() for value in a.policy or [] for t in value.split(",") if t.strip()]
+    policies = list(dict.fromkeys(StopPolicy.parse(t) for t in texts)) or [FIRST_MATCH]
+    if a.policy and len(texts) != len(policies):
+        raise UsageError(f"--policy {', '.join(texts)}: a policy is named twice")
+    return policies
+
+
+def _variant_label(config: str, policy: StopPolicy, n_configs: int, named_policies: list[str] | None) -> str:
+    """A variant's label: its config's (``--vary``), its stop policy's (``--policy``), or both."""
+    if not named_policies:
+        return config
+    return str(policy) if n_configs == 1 else f"{config} {policy}"
 
 
 def _variants(a: argparse.Namespace) -> dict[str, dict]:
@@ -226,9 +268,10 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--split", default="train",
                    help="split to tune on (default train; tuning on the split you report is optimistic)")
     s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
-    s.add_argument("--policy", metavar="K-of-N",
-                   help="tune for this stop policy: found when K of the last N frames are above sigma (default "
-                        "1-of-1, PIN's rule; docs/metrics.md)")
+    s.add_argument("--policy", metavar="POLICY",
+                   help="tune for this stop policy: K-of-N (found when K of the last N frames are above sigma) or "
+                        "house:topT+MARGIN (above sigma and the mean of the T highest earlier scores of the episode "
+                        "plus MARGIN); default 1-of-1, PIN's rule; docs/metrics.md, 'Stop policies'")
     s.set_defaults(func=_cmd_tune)
 
 
@@ -279,7 +322,8 @@ def _add_carry(sub: argparse._SubParsersAction) -> None:
                        description="Leave one frame-set out: sigma chosen (first-match objective) on the train "
                                    "splits of all the others (all frames of a set without one), read on its val "
                                    "split (all frames without one, or PATH:SPLIT); CM and first-match precision "
-                                   "with intervals over target instances, beside the set's own best sigma.")
+                                   "with intervals over target instances, beside the set's own best sigma (PIN's "
+                                   "rule); SR and CE of the navigation estimate where the set has geometry.")
     s.add_argument("framesets", nargs="+", help="frame-sets, PATH or PATH:SPLIT (at least two)")
     s.add_argument("--matcher", required=True, help="registered matcher (`pin-match list`)")
     add_matcher_config(s)
@@ -288,6 +332,11 @@ def _add_carry(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--vary", metavar="KEY=V1,V2,...",
                    help="variants of the matcher, one per value of one config key (scored in one pass): each "
                         "variant's rows, then per set the variant chosen on the other sets alone (needs three sets)")
+    s.add_argument("--policy", action="append", metavar="POLICY[,POLICY...]",
+                   help="read with these stop policies (repeatable; K-of-N or house:topT+MARGIN, e.g. "
+                        "--policy 1-of-1,2-of-3 --policy=house:top{1,3}+{0.05,0.1} with shell braces for a grid): "
+                        "each policy's rows, then per set the policy (and --vary value) chosen on the other sets "
+                        "alone (needs three sets); default 1-of-1, PIN's rule")
     s.add_argument("--json", type=Path, help="write the rows here")
     add_run_options(s, workers=WORKERS_HELP)
     add_scheduler(s)
@@ -308,6 +357,9 @@ def _add_demo(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--out", type=Path, default=DEMO_OUT, help=f"output folder (default {DEMO_OUT})")
     s.add_argument("--seed", type=int, default=0,
                    help="seed of the demo's frame-sets (default 0); a set built with another is built again")
+    s.add_argument("--tune", action="store_true",
+                   help="score the train splits too and tune sigma there (first-match), instead of the sigmas shipped "
+                        "for the seed-0 sets; writes each set's table to ship (demo_sigmas.json in its folder)")
     add_run_options(s, workers=WORKERS_HELP)
     add_scheduler(s)
     s.set_defaults(func=_cmd_demo)

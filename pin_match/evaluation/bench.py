@@ -2,8 +2,9 @@
 
 This is the toolkit's main job (``pin-match demo`` runs it on each of its sets: ``demo``).
 By default sigma is tuned on the train split and applied to val, never tuned on val;
-``sigma_from`` can name another tuning split, "default" (each matcher's default) or
-"paper" (``paper_thresholds.json``, package data). Whatever the choice, every row of every table says it.
+``sigma_from`` can name another tuning split, "default" (each matcher's default), "paper"
+(``paper_thresholds.json``, package data) or a thresholds file (a ``Path``: a table of sigmas by
+matcher id, such as the demo's shipped ones). Whatever the choice, every row of every table says it.
 """
 
 from __future__ import annotations
@@ -85,7 +86,7 @@ class Bench:
 
 
 def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | Mapping[str, dict],
-          out: str | Path | BenchLayout, *, sigma_from: str = "train", objective: str = DEFAULT_OBJECTIVE,
+          out: str | Path | BenchLayout, *, sigma_from: str | Path = "train", objective: str = DEFAULT_OBJECTIVE,
           run: RunOptions = DEFAULT_RUN, watch: Stopwatch | None = None) -> Bench:
     """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``.
 
@@ -102,13 +103,14 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
         get_matcher_class(name)
     ctx = EvalContext.of(data)
     splits = sorted(set(ctx.fs.episodes.split))
-    if sigma_from not in ("default", "paper") and sigma_from not in splits:
+    tuning = not isinstance(sigma_from, Path) and sigma_from not in ("default", "paper")
+    if tuning and sigma_from not in splits:
         raise BenchError(f"frame-set {ctx.fs.root} has no {sigma_from!r} split to tune sigma on (it has {splits}): "
                          f"pass --sigma-from with one of {splits} (tuning on the reported split {REPORT_SPLIT!r} is "
                          "optimistic), 'default' for each matcher's default sigma, or 'paper' for the paper's")
     layout = out if isinstance(out, BenchLayout) else BenchLayout(Path(out))
     watch = watch or Stopwatch()
-    scored_split = None if sigma_from not in ("default", "paper") else REPORT_SPLIT  # no tuning: val is all it needs
+    scored_split = None if tuning else REPORT_SPLIT  # no tuning: val is all it needs
     n_frames = len(ctx.fs.split(scored_split).frames)
     with watch.step(f"score {' + '.join(configs)}", f"{n_frames} frames, one pass"):
         tables = dict(zip(configs, score_many(ctx.fs, configs, split=scored_split, out=layout.scores, run=run)))
@@ -130,16 +132,16 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     return Bench(joint, results, run_loaded)
 
 
-def _choose(table: ScoreTable, ctx: EvalContext, sigma_from: str, objective: str,
+def _choose(table: ScoreTable, ctx: EvalContext, sigma_from: str | Path, objective: str,
             threshold_file: Path) -> tuple[SigmaChoice, dict | None]:
     """The sigma applied, and the tuning result when it was tuned (written to ``threshold_file`` for the record,
     passed on in memory). Without tuning, a thresholds file an earlier run left there is removed: it would be
     read back as this run's."""
-    if sigma_from in ("default", "paper"):
+    if isinstance(sigma_from, Path) or sigma_from in ("default", "paper"):
         threshold_file.unlink(missing_ok=True)
         if sigma_from == "default":
             return resolve_sigma(table.matcher_id, table.meta.get("default_sigma")), None
-        return load_threshold("paper", table.matcher_id), None
+        return load_threshold(sigma_from, table.matcher_id), None
     result = tune(table, ctx, objective=objective, split=sigma_from)
     write_thresholds(result, threshold_file)
     return tuned_choice(result, f"tuned on {ctx.fs.root}, written to {threshold_file}"), result

@@ -73,7 +73,9 @@ def thresholds_path(thresholds: str | Path) -> Path:
 def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
     """Sigma for a matcher from a tuned file (``{"matcher", "sigma", ...}``) or a table of several.
 
-    The table form is ``paper_thresholds.json``, package data: ``{"source": ..., "thresholds": {name: {"sigma": x}}}``.
+    The table form is ``paper_thresholds.json``, package data: ``{"source": ..., "thresholds": {name: {"sigma": x}}}``
+    (an optional ``label`` is the sigma's source in a table cell, as the demo's shipped sigmas say where they come
+    from).
     ``matcher_name`` may be a registry name or a full id (``name@hash``).
     """
     path = thresholds_path(thresholds)
@@ -96,8 +98,8 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
                     raise SigmaError(f"{path} gives no sigma for {name!r} ({_note(table[name])}); it gives one for "
                                      f"{', '.join(covered)}. Tune {name} or pass --threshold SIGMA")
                 value = _sigma(_entry(table[name]), path, name)
-                label = "paper" if path == PAPER_THRESHOLDS else "table"
-                return SigmaChoice(value, label, f"{name}'s entry in {path}")
+                label = "paper" if path == PAPER_THRESHOLDS else str(data.get("label", "table"))
+                return SigmaChoice(value, label, f"{name}'s entry in {path}: {data.get('source', 'no source given')}")
         raise SigmaError(f"{path} has no threshold for {matcher_name!r}; it covers only {', '.join(covered)}. "
                          f"Tune {matcher_name.split('@')[0]} (pin-match tune) or pass --threshold SIGMA")
     raise SigmaError(f"{path} is neither a tuned thresholds file nor a {{'thresholds': {{...}}}} table")
