@@ -319,3 +319,34 @@ def test_a_recording_with_poses_in_some_episodes_only_is_refused(walk_set, tmp_p
                              gps=[0.0, 0.0], compass=[0.0]))
         with pytest.raises(RecordingError, match="no gps or compass, which earlier steps had"):
             recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32)))
+
+
+# ---------------------------------------------------------------------- the default synthetic set: oracles
+def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
+    """Scores from the ground truth: each frame scores the share of it that an object of ``role`` covers, its one
+    point that object's pixel nearest the object's centroid."""
+    vis = fs.visibility[fs.visibility.role == role].drop_duplicates("frame_id").set_index("frame_id")
+    rows = []
+    for f in fs.frames.itertuples():
+        score, xs, ys = 0.0, [], []
+        if f.frame_id in vis.index:
+            row = vis.loc[f.frame_id]
+            py, px = np.nonzero(fs.instance_mask(f.frame_id) == row.mask_value)
+            k = int(np.argmin((px - px.mean()) ** 2 + (py - py.mean()) ** 2))
+            score, xs, ys = float(row.pixels) / (f.height * f.width), [px[k] + 0.5], [py[k] + 0.5]
+        rows.append(dict(frame_id=f.frame_id, episode_id=f.episode_id, step=f.step, split=f.split, score=score,
+                         crop_scores=[score], points_x=xs, points_y=ys, point_scores=[score] * len(xs)))
+    return ScoreTable(pd.DataFrame(rows), dict(matcher=f"oracle-{role}", matcher_id=f"oracle-{role}@0",
+                                               frameset_fingerprint=fs.fingerprint))
+
+
+@pytest.mark.slow
+def test_oracles_on_the_default_set(default_synth):
+    """Matching the target wherever it shows is SR 100 %; matching its look-alikes instead is CE (they stand more
+    than 2 m from it)."""
+    ctx = EvalContext(default_synth)
+    sigma = 1e-9  # any pixel of the object
+    target = metrics_of(episodes_at(ctx.placements(oracle_table(default_synth, "target"), "val"), sigma))
+    lookalike = metrics_of(episodes_at(ctx.placements(oracle_table(default_synth, "same_category"), "val"), sigma))
+    assert target["sr"] == 100.0 and target["ce"] == 0.0
+    assert lookalike["ce"] >= 90.0 and lookalike["sr"] == 0.0
