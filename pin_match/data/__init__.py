@@ -1,10 +1,12 @@
 """Frame-sets: the format (loading and validating, writing, reading image files) and the sources that make them.
 
 The format: ``frameset`` (``FrameSet``), ``writer`` (``FrameSetWriter``), ``images`` (the one reader
-of photos, reference views and masks), ``importer`` (a PIN recording into a frame-set), and what
-every source that draws frames shares: ``compose`` (frame geometry, cut-outs, pasting) and
-``mask_check`` (the rules a shipped cut-out passes). The sources (synthetic, recolour, CORe50,
-grocery, MyVLM, recoloured twins) are one module each in the catalogue ``pin_match.data.sources``;
+of photos, reference views and masks), ``geometry`` (the optional camera poses, object positions and
+geodesic lengths the navigation estimate needs), ``importer`` (a PIN recording into a frame-set), and
+what every source that draws frames shares: ``compose`` (frame geometry, cut-outs, pasting) and
+``mask_check`` (the rules a shipped cut-out passes). The sources (gso: the scans and the synthetic
+generator, recolour, CORe50, grocery, MyVLM, recoloured twins) are one module each in the catalogue
+``pin_match.data.sources``;
 the synthetic renderer itself is ``synth/``. Nothing here knows a matcher.
 """
 
