@@ -83,8 +83,8 @@ def test_a_variant_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
     high house matches nothing in a low one) and the first listed, A, is kept."""
     low, high = scored_set(tiny_frameset, LOW), scored_set(tiny_frameset, HIGH)
     variants = {"A": {"h1": low, "h2": low, "h3": high}, "B": {"h1": high, "h2": low, "h3": low}}
-    assert carry_risk({"h1": low, "h2": low}) == (0.0, 0.0)
-    assert carry_risk({"h1": low, "h3": high}) == (np.inf, np.inf)  # high -> low: nothing matched
+    assert carry_risk({"h1": low, "h2": low}) == (0.0, 0.0, 0.0)
+    assert carry_risk({"h1": low, "h3": high}) == (np.inf, np.inf, 100.0)  # high -> low: nothing matched
     rows = chosen_and_carried(variants, BOOT).set_index("set")
     assert rows.variant.to_dict() == {"h1": "B", "h2": "A", "h3": "A"}
     assert rows.loc["h3", "cm"] == 50.0 and rows.loc["h1", "cm"] == 50.0  # the choice never saw the set it is read on
@@ -119,3 +119,74 @@ def test_carry_command_varies_one_config_key_in_one_pass(tiny_frameset, tmp_path
     # copies have the set's fingerprint: one table serves all three)
     assert main([*args, "--vary", "stride=4"]) == 2
     assert "at least two different values" in capsys.readouterr().err
+
+
+def shifted_house(fs, shift: float, val_shift: float | None = None) -> ScoredSet:
+    """The tiny set read as a walk that sees the other object and nothing first, then the look-alike, then the target
+    (steps reordered), every score raised by ``shift`` (the val episode's by ``val_shift`` where given): a house
+    whose level differs."""
+    order = {2: 0, 3: 1, 1: 2, 0: 3}  # tiny step -> walk step
+    scores = {0: 0.6, 1: 0.35, 2: 0.2, 3: 0.25}  # by tiny step: target 0.6, look-alike 0.35, other 0.2, nothing 0.25
+    shifts = {"ep_train": shift, "ep_val": shift if val_shift is None else val_shift}
+    frames = frame_labels(fs).assign(score=lambda t: [scores[s] + shifts[e] for s, e in zip(t.step, t.episode_id)],
+                                     step=lambda t: [order[s] for s in t.step])
+    return ScoredSet(tuning=frames, reading=frames, clusters=instance_clusters(fs.episodes))
+
+
+def test_a_house_relative_line_carries_a_level_shift_upward_but_sigma_stays_absolute(tiny_frameset):
+    from pin_match.evaluation.stop import HouseStop
+
+    sets = {"low": shifted_house(tiny_frameset, 0.0), "high": shifted_house(tiny_frameset, 0.3)}
+    plain = leave_one_out(sets, BOOT).set_index("set")
+    # PIN's rule: sigma from the low house (0.6, its target's score) fires in the high house on its look-alike (0.65)
+    # before its target; from the high house (0.9) nothing fires in the low one
+    assert plain.loc["high", "first_precision"] == 0.0 and plain.loc["high", "cm"] == 50.0
+    assert plain.loc["low", "match"] == 0.0 and plain.loc["low", "success_gap"] == 100.0
+    house = leave_one_out(sets, BOOT, HouseStop(top=1, margin=0.2)).set_index("set")
+    # the look-alike clears the house by 0.1 (0.65 over 0.55), the target by 0.25: in the high house the line keeps
+    # the look-alike out and the target fires, at the low house's sigma (0.6)
+    assert house.loc["high", "sigma"] == pytest.approx(0.6) and house.loc["high", "first_precision"] == 100.0
+    assert house.loc["high", "cm"] == 0.0 and house.loc["high", "first_gap"] == 0.0
+    # sigma is still an absolute floor, chosen at the top of its ties on the high house (its target, 0.9): above the
+    # low house's target, so nothing fires there
+    assert house.loc["low", "sigma"] == pytest.approx(0.9) and house.loc["low", "match"] == 0.0
+    assert np.isnan(house.sr).all()  # no geometry: no navigation estimate
+
+
+def test_the_policy_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
+    """Every house holds a low episode and one 0.3 higher: no sigma serves both under PIN's rule (the low target, 0.6,
+    is below the high look-alike, 0.65); it is chosen at the high target (0.9), matching nothing in the low episodes:
+    no CM and no precision gap, half the episodes lost, as at each set's own best sigma. The house line serves both
+    at sigma 0.6 (success 50 points above PIN's own best); the success gap breaks the tie, so the house policy is
+    chosen without each set and stops on the target everywhere."""
+    from pin_match.evaluation.stop import FIRST_MATCH, HouseStop
+
+    shifts = ((0.0, 0.3), (0.3, 0.0), (0.0, 0.3))
+    sets = {f"h{i}": shifted_house(tiny_frameset, low, high) for i, (low, high) in enumerate(shifts)}
+    house = HouseStop(top=1, margin=0.2)
+    assert carry_risk(sets, FIRST_MATCH) == (0.0, 0.0, 0.0) and carry_risk(sets, house) == (0.0, 0.0, -50.0)
+    rows = chosen_and_carried({"pin": sets, "house": sets}, BOOT, {"pin": FIRST_MATCH, "house": house})
+    assert (rows.variant == "house").all() and (rows.first_precision == 100.0).all() and (rows.cm == 0.0).all()
+    assert (rows.sigma == 0.6).all()
+
+
+def test_carry_command_compares_stop_policies(tiny_frameset, tmp_path, capsys):
+    import json
+    import shutil
+
+    sets = [str(tiny_frameset.root)]
+    for name in ("b", "c"):
+        shutil.copytree(tiny_frameset.root, tmp_path / name)
+        sets.append(str(tmp_path / name))
+    args = ["carry", *sets, "--matcher", "color", "--cache", str(tmp_path / "scores"), "--bootstrap", "20", "--quiet"]
+    code = main([*args, "--policy", "1-of-1,2-of-3", "--policy=house:top1+0.1", "--json", str(tmp_path / "c.json")])
+    out = capsys.readouterr().out
+    assert code in (0, None) and "(house:top1+0.1)" in out and "(2-of-3)" in out
+    assert "stop policy chosen on the other sets alone" in out
+    report = json.loads((tmp_path / "c.json").read_text())
+    assert report["policies"] == {"1-of-1": "1-of-1", "2-of-3": "2-of-3", "house:top1+0.1": "house:top1+0.1"}
+    assert {r["variant"] for r in report["chosen"]["rows"]} <= set(report["policies"])
+    assert main([*args, "--policy", "house:top1+0.1,house:top1+0.10"]) == 2
+    assert "named twice" in capsys.readouterr().err
+    assert main([*args, "--policy", "house:best"]) == 2
+    assert "house:topT+MARGIN" in capsys.readouterr().err

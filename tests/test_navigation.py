@@ -191,32 +191,33 @@ def test_a_writer_with_a_camera_needs_every_episodes_geometry(tmp_path):
 
 def test_a_rendered_pixel_lands_inside_its_object(tmp_path):
     """The renderer's own depth and pose: every pixel of a box, back-projected, lies inside the box."""
-    from pin_match.data.synth.generate import HFOV, _camera
-    from pin_match.data.synth.render import Light, Renderer, vertical_fov
+    from pin_match.data.synth.render import Camera, Light, Renderer, vertical_fov
     from pin_match.data.synth.shapes import box
     from pin_match.data.synth.walk import CAMERA_HEIGHT
+
+    hfov, yaw, pitch = 42.0, 0.3, -0.2  # the box ahead, left of the axis and below it
+    ahead = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch))
+    camera = Camera((0.0, 0.0, CAMERA_HEIGHT), (ahead[0], ahead[1], CAMERA_HEIGHT + ahead[2]))
 
     renderer = Renderer()
     try:
         centre, size = np.array([2.0, 0.7, 0.8]), np.array([0.3, 0.4, 0.5])
         body = renderer.add(box(*size), np.full((8, 8, 3), 200, np.uint8), tuple(centre))
-        pose = (0.0, 0.0, 0.3, -0.2)  # x, y, yaw, pitch: the box ahead, left of the axis and below it
         width, height = 180, 320
-        _, ids, depth = renderer.render(_camera(pose), width, height, vertical_fov(HFOV, width, height), Light())
+        _, ids, depth = renderer.render(camera, width, height, vertical_fov(hfov, width, height), Light())
     finally:
         renderer.close()
     ys, xs = np.nonzero(ids == body)
     assert len(xs) > 500
-    camera = CameraModel(HFOV)
-    points = back_project(Pose(0.0, 0.0, CAMERA_HEIGHT, 0.3, -0.2), camera.focal_px(width), (width / 2, height / 2),
+    points = back_project(Pose(0.0, 0.0, CAMERA_HEIGHT, yaw, pitch), CameraModel(hfov).focal_px(width),
+                          (width / 2, height / 2),
                           np.stack([xs + 0.5, ys + 0.5], 1), depth[ys, xs])
     outside = np.abs(points - centre) - size / 2
     assert outside.max() < 0.01, f"a back-projected pixel lies {outside.max():.3f} m outside the box"
 
 
 def test_the_synthetic_generator_records_geometry(tmp_path):
-    from pin_match.data.synth import SynthSize
-    from pin_match.data.synth.generate import generate
+    from pin_match.data.synth import SynthSize, generate
     from pin_match.data.synth.scene import LOOKALIKE_GAP
 
     fs = generate(tmp_path / "s", SynthSize(seed=2, episodes=2, objects_per_family=3, frames_per_episode=8), workers=1)

@@ -1,4 +1,4 @@
-"""Stop policies: 1-of-1 is today's rule exactly; 2-of-3 by hand; tuning sigma for a policy."""
+"""Stop policies: 1-of-1 is today's rule exactly; 2-of-3 by hand; the sweep of any policy; tuning sigma for one."""
 
 from __future__ import annotations
 
@@ -9,8 +9,9 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation.metrics import COUNT_KEYS, METRIC_KEYS, frame_arrays, threshold_metrics
-from pin_match.evaluation.policies import policy_metrics, tune_policy
-from pin_match.evaluation.stop import PolicyError, StopPolicy, found_frames
+from pin_match.evaluation.policies import policy_metrics, policy_sigma, policy_sweep, tune_policy
+from pin_match.evaluation.stop import FIRST_MATCH, HouseStop, PolicyError, StopPolicy, found_frames
+from pin_match.evaluation.tuning import sigma_for
 
 
 def scored_episodes(roles: dict[str, str], scores: dict[str, list[float]]) -> pd.DataFrame:
@@ -75,3 +76,50 @@ def test_tune_for_a_policy(tiny_frameset):
     two = tune_policy(table, tiny_frameset, StopPolicy(2, 2), objective="first-match", split="train")
     # 2-of-2 first fires on step 1 (a look-alike) at best: undefined success is never chosen over 0
     assert two["metrics_at_sigma"]["first_match_precision"] in (0.0, None)
+
+
+@pytest.mark.parametrize("seed", range(4))
+@pytest.mark.parametrize("policy", [StopPolicy(1, 1), HouseStop(top=1, margin=0.1), HouseStop(top=3, margin=-0.05),
+                                    StopPolicy(2, 3)])
+def test_the_sweep_of_a_policy_is_its_metrics_at_every_distinct_score(seed, policy):
+    """A 1-of-1 window is swept once on the gated scores: the same counts as applying each sigma in turn."""
+    scored = random_scored(seed)
+    curve = policy_sweep(scored, policy)
+    assert curve["sigma"].tolist() == sorted(set(scored["score"]))
+    for _, row in curve.iterrows():
+        each = policy_metrics(scored, row["sigma"], policy)
+        for key in (*COUNT_KEYS, *METRIC_KEYS):
+            assert row[key] == each[key] or (math.isnan(row[key]) and math.isnan(each[key])), (row["sigma"], key)
+
+
+def test_pin_s_rule_chooses_the_sigma_of_the_plain_sweep():
+    for seed in range(4):
+        scored = random_scored(seed)
+        assert policy_sigma(scored, FIRST_MATCH) == sigma_for(scored)
+
+
+def test_tune_for_a_house_relative_policy(tiny_frameset):
+    from test_report_page import make_table
+
+    table = make_table(tiny_frameset)
+    result = tune_policy(table, tiny_frameset, StopPolicy.parse("house:top1+0.1"), split="train")
+    # the train episode shows the target first (0.9): no earlier frame, so sigma alone decides there
+    assert result["policy"] == "house:top1+0.1" and result["objective_value"] == 100.0
+    assert result["metrics_at_sigma"]["frames_to_first_match"] == 1.0
+
+
+def test_tune_command_takes_a_house_relative_policy(tiny_frameset, tmp_path, capsys):
+    import json
+
+    from test_report_page import make_table
+
+    from pin_match.cli import main
+
+    make_table(tiny_frameset).write(tmp_path / "scores.parquet")
+    out = tmp_path / "t.json"
+    args = ["tune", str(tmp_path / "scores.parquet"), "--frameset", str(tiny_frameset.root), "--out", str(out)]
+    assert main([*args, "--policy", "house:top1+0.1"]) in (0, None)
+    assert "stop policy house:top1+0.1" in capsys.readouterr().out
+    assert json.loads(out.read_text())["policy"] == "house:top1+0.1"
+    assert main([*args, "--policy", "house:top+0.1"]) == 2
+    assert "house:topT+MARGIN" in capsys.readouterr().err

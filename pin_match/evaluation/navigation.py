@@ -131,16 +131,16 @@ def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
 def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
     """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts."""
     arr = places.arrays
-    fired = found_frames(arr, sigma, policy)
-    matched = arr.score >= sigma
+    fired, line = found_frames(arr, sigma, policy), policy.line(arr, sigma)  # line: sigma, or the policy's per frame
+    matched = arr.score >= line
     rows = []
     starts = np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(arr.score) else np.zeros(0, np.int64)
     for start, end in zip(starts, np.r_[starts[1:], len(arr.score)]):
-        rows.append(_episode(places, sigma, int(start), int(end), fired, matched))
+        rows.append(_episode(places, line, int(start), int(end), fired, matched))
     return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
 
 
-def _episode(places: Placements, sigma: float, start: int, end: int, fired: np.ndarray,
+def _episode(places: Placements, line: np.ndarray, start: int, end: int, fired: np.ndarray,
              matched: np.ndarray) -> dict:
     episode_id = str(places.arrays.episode_ids[places.arrays.episode[start]])
     geometry = places.geometry.episodes[episode_id]
@@ -150,7 +150,7 @@ def _episode(places: Placements, sigma: float, start: int, end: int, fired: np.n
     for t in np.flatnonzero(fired[start:end]) + start:
         seen = np.flatnonzero(matched[start:t + 1])  # the goal comes from the latest matched frame of the window
         source = start + int(seen[-1]) if seen.size else t
-        placed = places.place(places.frame_ids[source], sigma)
+        placed = places.place(places.frame_ids[source], float(line[source]))
         if placed is None:
             unplaced += 1
             continue

@@ -1,8 +1,9 @@
-"""Stop policies: when an agent that watches a sequence of frames declares the target found.
+"""PIN's detection metrics under a stop policy, and sigma chosen for one.
 
 PIN's rule stops at the first frame at or above sigma (1-of-1). Agents that confirm over
 several frames stop when ``k`` of the last ``n`` frames of the episode are at or above sigma
-(k-of-n). A frame where the policy fires is "found"; the metrics are PIN's, computed on
+(k-of-n); a house-relative policy also asks the frame to clear the house's own level
+(``stop.HouseStop``). A frame where the policy fires is "found"; the metrics are PIN's, computed on
 found frames instead of matched ones, by the same counting code (``metrics``), so 1-of-1
 equals today's metrics exactly. Definitions: docs/metrics.md, "Stop policies".
 """
@@ -18,8 +19,18 @@ import pandas as pd
 
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.metrics import METRIC_KEYS, frame_arrays, threshold_metrics, to_python
-from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy, found_frames
+from pin_match.evaluation.metrics import (
+    COUNT_KEYS,
+    METRIC_KEYS,
+    FrameArrays,
+    Scored,
+    as_arrays,
+    frame_arrays,
+    threshold_metrics,
+    to_python,
+)
+from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy, found_frames, gated_scores
+from pin_match.evaluation.sweep import sweep
 from pin_match.evaluation.tuning import (
     DEFAULT_MATCH_FLOOR,
     DEFAULT_OBJECTIVE,
@@ -29,7 +40,7 @@ from pin_match.evaluation.tuning import (
 )
 from pin_match.scoring.table import ScoreTable
 
-MAX_CANDIDATES = 2000  # sigmas tried when tuning for a policy: every distinct score, or this many quantiles
+MAX_CANDIDATES = 2000  # sigmas tried for a windowed policy (n > 1): every distinct score, or this many quantiles
 
 
 def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
@@ -40,7 +51,7 @@ def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = FIRS
     """
     arr = frame_arrays(scored)
     found = found_frames(arr, sigma, policy)
-    out = threshold_metrics(replace(arr, score=found.astype(np.float64)), 0.5)
+    out = threshold_metrics(fired_arrays(arr, found), 0.5)
     first = np.flatnonzero(found)
     if first.size:
         first = first[np.r_[True, arr.episode[first][1:] != arr.episode[first][:-1]]]
@@ -51,13 +62,35 @@ def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = FIRS
     return out
 
 
-def policy_sweep(scored: pd.DataFrame, policy: StopPolicy) -> pd.DataFrame:
-    """``policy_metrics`` at every candidate sigma (ascending): the table ``tuning.choose_sigma`` reads."""
-    scores = np.unique(scored["score"].to_numpy(np.float64))
+def fired_arrays(arr: FrameArrays, found: np.ndarray) -> FrameArrays:
+    """``arr`` with each frame's score replaced by 1 where the policy fires and 0 elsewhere: every metric at 0.5 (and
+    every interval, ``intervals.bootstrap_ci``) then reads "matched" as "found"."""
+    return replace(arr, score=found.astype(np.float64))
+
+
+def policy_sweep(scored: Scored, policy: StopPolicy) -> pd.DataFrame:
+    """Every count and threshold metric of ``policy_metrics`` at every distinct score as sigma (ascending): the table
+    ``tuning.choose_sigma`` reads. A 1-of-1 window is one sorted sweep of the gated scores (``stop.gated_scores``),
+    read at every distinct score; a longer window applies each sigma in turn, at most ``MAX_CANDIDATES`` of them."""
+    arr = as_arrays(scored)
+    scores = np.unique(arr.score)
+    if policy.n == 1:
+        gated = replace(arr, score=gated_scores(arr, policy))
+        curve = sweep(gated)
+        never = pd.DataFrame([{"sigma": np.inf, **threshold_metrics(gated, np.inf)}])  # above every gated score
+        rows = pd.concat([curve, never], ignore_index=True).iloc[np.searchsorted(curve["sigma"], scores)]
+        return rows.assign(sigma=scores).reset_index(drop=True)[["sigma", *COUNT_KEYS, *METRIC_KEYS]]
     if len(scores) > MAX_CANDIDATES:
         scores = np.unique(np.quantile(scores, np.linspace(0.0, 1.0, MAX_CANDIDATES)))
-    rows = [{"sigma": s, **policy_metrics(scored, s, policy)} for s in scores]
-    return pd.DataFrame(rows, columns=["sigma", *METRIC_KEYS, "frames_to_first_match"])
+    rows = [{"sigma": s, **threshold_metrics(fired_arrays(arr, found_frames(arr, s, policy)), 0.5)} for s in scores]
+    return pd.DataFrame(rows, columns=["sigma", *COUNT_KEYS, *METRIC_KEYS])
+
+
+def policy_sigma(scored: Scored, policy: StopPolicy = FIRST_MATCH, objective: str = DEFAULT_OBJECTIVE,
+                 match_floor: float = DEFAULT_MATCH_FLOOR) -> float:
+    """The sigma ``objective`` chooses for ``policy`` on scored frames (for 1-of-1, ``tuning.sigma_for``'s)."""
+    curve = policy_sweep(scored, policy)
+    return float(curve["sigma"].iloc[choose_sigma(curve, objective, match_floor)[0]])
 
 
 def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: str = DEFAULT_OBJECTIVE,
