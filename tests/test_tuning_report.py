@@ -170,7 +170,8 @@ def test_report_end_to_end(tiny_frameset, tmp_path):
                                "markdown": str(out / "metrics.md"), "latex": str(out / "metrics.tex"),
                                "sigma_curves": str(out / "sigma_curves.png"),
                                "score_distributions": str(out / "score_distributions.png"),
-                               "per_category_plot": str(out / "per_category.png"), "page": str(out / "report.html")}
+                               "per_category_plot": str(out / "per_category.png"), "sizes": str(out / "sizes.csv"),
+                               "page": str(out / "report.html")}  # no geometry here: no navigation files
     assert all(Path(path).stat().st_size > 0 for path in result["files"].values())
 
 

@@ -1,7 +1,9 @@
 """Two matchers on the same frames and split: the paired table, McNemar's test, and the page of their disagreements.
 
 Writes a ``layout.CompareFolder``: ``compare.csv``, ``compare.md`` and ``compare.html`` (images
-in ``compare_files/``); the numbers come from ``paired``, the pictures from ``pictures``.
+in ``compare_files/``); the numbers come from ``paired`` and, for AUROC-same per band of the
+objects' pixel area (rows ``AUROC-same <band> px``, same resamples), from ``sizes``; the pictures
+from ``pictures``.
 """
 
 from __future__ import annotations
@@ -21,6 +23,7 @@ from pin_match.evaluation.layout import CompareFolder
 from pin_match.evaluation.paired import disagreements, first_match_outcomes, mcnemar, paired_comparison
 from pin_match.evaluation.pictures import legend, scored_frame_image
 from pin_match.evaluation.sigma import SigmaChoice
+from pin_match.evaluation.sizes import paired_size_rows
 from pin_match.evaluation.tables import markdown_table
 from pin_match.scoring.table import ScoreTable
 
@@ -44,7 +47,7 @@ class Comparison:
     """What ``compare`` wrote: B against A on one split."""
 
     names: tuple[str, str]   # matcher ids of A and B
-    paired: pd.DataFrame     # rows = metrics: A, B, B - A and its interval
+    paired: pd.DataFrame     # rows = metrics (then AUROC-same per size band, ``sizes``): A, B, B - A and its interval
     test: dict               # McNemar on "the first match is the target"
     summary: list[str]       # the sentences above the table, as on the page
     folder: CompareFolder
@@ -59,6 +62,9 @@ def compare(a: AtSigma, b: AtSigma, data: FrameSet | EvalContext, out: str | Pat
     scored_a, scored_b = (ctx.scored(side.table, split) for side in (a, b))
     paired = paired_comparison(scored_a, scored_b, a.sigma.value, b.sigma.value, clusters=ctx.clusters, names=names,
                                boot=ctx.boot)
+    bands = paired_size_rows(scored_a, scored_b, ctx.fs.visibility, clusters=ctx.clusters, names=names, boot=ctx.boot)
+    attrs, paired = paired.attrs, pd.concat([paired, bands]).rename_axis("Metric")
+    paired.attrs.update(attrs)
     test = mcnemar(*first_match_outcomes(scored_a, scored_b, a.sigma.value, b.sigma.value))
     atomic.write_text(folder.csv, paired.to_csv())
     summary = summary_lines(paired, test, names, (a.sigma, b.sigma), split)

@@ -48,6 +48,7 @@ class ReportFiles:
     per_category_plot: Path
     navigation: Path  # each episode's stop (``navigation.episodes_at``); written where the frame-set has geometry
     navigation_curves: Path
+    sizes: Path  # the figures per band of the objects' pixel area (``sizes.size_table``)
     page: Path
 
     @classmethod
@@ -57,7 +58,8 @@ class ReportFiles:
                    latex=folder / "metrics.tex", sigma_curves=folder / "sigma_curves.png",
                    score_distributions=folder / "score_distributions.png",
                    per_category_plot=folder / "per_category.png", navigation=folder / "navigation.csv",
-                   navigation_curves=folder / "navigation_curves.png", page=folder / REPORT_PAGE)
+                   navigation_curves=folder / "navigation_curves.png", sizes=folder / "sizes.csv",
+                   page=folder / REPORT_PAGE)
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,7 @@ from pin_match.evaluation.gallery import DEFAULT_CAP, Section, frame_points, sec
 from pin_match.evaluation.layout import ReportFiles
 from pin_match.evaluation.pictures import cohort_members, frame_image, legend, references
 from pin_match.evaluation.scales import LOOKALIKE, scale_table, target_cohorts
+from pin_match.evaluation.sizes_page import sizes_section
 from pin_match.evaluation.stop_page import stop_html
 from pin_match.evaluation.tables import report_tables
 from pin_match.scoring.table import ScoreTable
@@ -157,6 +158,7 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
              html.table(overall, f"split {result['split']}, sigma {sigma:g} ({result['sigma_source']})"),
              html.heading("Per target category"), html.table(per_category), html.heading("Plots"),
              html.gallery([html.image(plot.name, alt, 440) for plot, alt in plots if plot.exists()]), page_legend()]
+    parts += sizes_section(files.sizes)
     parts += navigation_html(fs, table, evaluation, sigma, assets)
     parts += stop_html(evaluation.arrays, sigma)
     cohorts = target_cohorts(table)
