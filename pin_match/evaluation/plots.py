@@ -77,32 +77,30 @@ def _lines(text: str, fits, level: int = 0) -> list[str]:
 def plot_sigma_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
     """TM / CM / NM (% of matched frames) and %Match (% of episodes) against sigma."""
     step = max(1, len(curve) // MAX_PLOT_POINTS)
-    c = curve.iloc[::step]
-
-    def draw(ax) -> None:
-        for key, label in (("tm_pct", "TM"), ("cm_pct", "CM"), ("nm_pct", "NM"), ("match_pct", "%Match")):
-            # a row holds for sigma in (previous distinct score, its score]: steps drawn "pre"
-            ax.plot(c["sigma"], c[key], label=label, linestyle="--" if key == "match_pct" else "-",
-                    drawstyle="steps-pre")
-        ax.axvline(sigma, color="k", linewidth=0.8, label=f"sigma = {sigma:g}")
-        ax.set(xlabel="sigma", ylabel="%", ylim=(-2, 102))
-        ax.legend(fontsize=8)
-
-    _figure(Path(path), title, draw)
+    _curves(curve.iloc[::step], sigma, (("tm_pct", "TM"), ("cm_pct", "CM"), ("nm_pct", "NM"), ("match_pct", "%Match")),
+            "%", Path(path), title)
 
 
 def plot_navigation_curves(curve: pd.DataFrame, sigma: float, path: str | Path, title: str = "") -> None:
     """SR, SPL and CE (% of episodes) and the share not found against sigma (``navigation.navigation_sweep``)."""
+    _curves(curve, sigma, (("sr", "SR"), ("spl", "SPL"), ("ce", "CE"), ("not_found_pct", "not found")),
+            "% of episodes", Path(path), title)
+
+
+def _curves(curve: pd.DataFrame, sigma: float, series: tuple[tuple[str, str], ...], ylabel: str, path: Path,
+            title: str) -> None:
+    """Percentages against sigma, the last series dashed, sigma marked."""
 
     def draw(ax) -> None:
-        for key, label in (("sr", "SR"), ("spl", "SPL"), ("ce", "CE"), ("not_found_pct", "not found")):
-            ax.plot(curve["sigma"], curve[key], label=label, linestyle="--" if key == "not_found_pct" else "-",
+        for key, label in series:
+            # a row holds for sigma in (previous distinct score, its score]: steps drawn "pre"
+            ax.plot(curve["sigma"], curve[key], label=label, linestyle="--" if key == series[-1][0] else "-",
                     drawstyle="steps-pre")
         ax.axvline(sigma, color="k", linewidth=0.8, label=f"sigma = {sigma:g}")
-        ax.set(xlabel="sigma", ylabel="% of episodes", ylim=(-2, 102))
+        ax.set(xlabel="sigma", ylabel=ylabel, ylim=(-2, 102))
         ax.legend(fontsize=8)
 
-    _figure(Path(path), title, draw)
+    _figure(path, title, draw)
 
 
 def plot_score_distributions(scored: Scored, sigma: float, path: str | Path, title: str = "") -> None:
