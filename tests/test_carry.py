@@ -99,15 +99,21 @@ def test_a_variant_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
         chosen_and_carried({"A": {"h1": low, "h2": low, "h3": low}, "B": {"h1": low, "h2": low, "h4": low}}, BOOT)
 
 
-def test_carry_command_varies_one_config_key_in_one_pass(tiny_frameset, tmp_path, capsys):
-    import json
+def carry_args(tiny_frameset, tmp_path) -> list[str]:
+    """``pin-match carry`` of ``color`` on three copies of the tiny set (one left out at a time)."""
     import shutil
 
     sets = [str(tiny_frameset.root)]
     for name in ("b", "c"):
         shutil.copytree(tiny_frameset.root, tmp_path / name)
         sets.append(str(tmp_path / name))
-    args = ["carry", *sets, "--matcher", "color", "--cache", str(tmp_path / "scores"), "--bootstrap", "20", "--quiet"]
+    return ["carry", *sets, "--matcher", "color", "--cache", str(tmp_path / "scores"), "--bootstrap", "20", "--quiet"]
+
+
+def test_carry_command_varies_one_config_key_in_one_pass(tiny_frameset, tmp_path, capsys):
+    import json
+
+    args = carry_args(tiny_frameset, tmp_path)
     code = main([*args, "--vary", "stride=4,8", "--json", str(tmp_path / "carry.json")])
     out = capsys.readouterr().out
     assert code in (0, None) and "(stride=4)" in out and "(stride=8)" in out
@@ -172,13 +178,8 @@ def test_the_policy_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
 
 def test_carry_command_compares_stop_policies(tiny_frameset, tmp_path, capsys):
     import json
-    import shutil
 
-    sets = [str(tiny_frameset.root)]
-    for name in ("b", "c"):
-        shutil.copytree(tiny_frameset.root, tmp_path / name)
-        sets.append(str(tmp_path / name))
-    args = ["carry", *sets, "--matcher", "color", "--cache", str(tmp_path / "scores"), "--bootstrap", "20", "--quiet"]
+    args = carry_args(tiny_frameset, tmp_path)
     code = main([*args, "--policy", "1-of-1,2-of-3", "--policy=house:top1+0.1", "--json", str(tmp_path / "c.json")])
     out = capsys.readouterr().out
     assert code in (0, None) and "(house:top1+0.1)" in out and "(2-of-3)" in out
