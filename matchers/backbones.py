@@ -9,6 +9,9 @@ constructed, which the matchers do lazily on first use, never at import.
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
+import functools
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -189,6 +192,35 @@ def state_dict_by_order(model: torch.nn.Module, state: dict[str, torch.Tensor],
     return dict(zip(target, state.values()))
 
 
+# glibc's mallopt parameters (malloc.h) and the values set: blocks up to 1 GiB come from the heap, and up to 2 GiB
+# of freed memory at its top stays there for the next batch
+M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
+HEAP_BLOCKS_UP_TO, HEAP_KEPT_UP_TO = 2**30, 2**31 - 1
+
+
+@functools.cache
+def keep_large_blocks_on_the_heap() -> bool:
+    """Have glibc's malloc serve a CNN's activations from the heap and keep them there between batches.
+
+    By default glibc gives every block above an adaptive threshold (at most 32 MiB) a fresh
+    ``mmap``, which the kernel zeroes page by page on first touch and takes back when the block is
+    freed. One layer's output for a scoring batch is larger (8 frames, 16 crops at 448 px: 308 MB),
+    so every layer of every batch paid page faults (docs/performance.md). Cutting the batch into
+    passes below the threshold avoids them too, but multiplies the network's thread
+    synchronisations, which a busy machine makes slower still.
+
+    The setting is the process's, made once, when the first feature-map backbone is built; the
+    heap then keeps up to the largest batch's activations after it. It covers allocations of the
+    main thread: another thread's arena maps blocks above 64 MiB whatever the setting. Without
+    glibc (another C library, another platform) nothing changes. Returns whether it took.
+    """
+    try:
+        mallopt = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6").mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(M_MMAP_THRESHOLD, HEAP_BLOCKS_UP_TO)) and bool(mallopt(M_TRIM_THRESHOLD, HEAP_KEPT_UP_TO))
+
+
 class FeatureMapBackbone:
     """A CNN trunk cut at one layer: its feature map's cells are the patch tokens.
 
@@ -196,11 +228,12 @@ class FeatureMapBackbone:
     stages only. The global vector is the feature map's mean over cells (the network's own
     pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
     channels-last: CPU convolutions run faster in that layout, with features equal up to rounding
-    (docs/performance.md).
+    (docs/performance.md). Its activations stay on the heap (``keep_large_blocks_on_the_heap``).
     """
 
     def __init__(self, trunk: torch.nn.Sequential, normalisation: tuple[Sequence[float], Sequence[float], str],
                  img_size: int, layer: str, device: str = "cpu") -> None:
+        keep_large_blocks_on_the_heap()
         self.trunk = trunk.eval()
         with torch.inference_mode():  # the layer's stride, measured: the libraries list only some reductions
             stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]

@@ -68,9 +68,15 @@ class CompositeMatcher(Matcher):
         """How the user points the part ``role`` at other weights, as the error of a missing checkpoint says."""
         return f"set {role}_cfg.weights="
 
+    def roles_to_prepare(self) -> tuple[str, ...]:
+        """The parts ``prepare`` prepares for a target: all of them, unless a composite uses one only for its
+        network (``verify``'s zoom) or leaves one off by config (its keypoints when that signal is not used)."""
+        return tuple(self._parts)
+
     def _prepare(self, target: Target) -> None:
         # the full target: a category-modality part gets the label, any other part strips it itself
-        for role, part in self._parts.items():
+        for role in self.roles_to_prepare():
+            part = self._parts[role]
             try:
                 part.prepare(target)
             except WeightsError as exc:

@@ -65,6 +65,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
+from pin_match.contract.cohort import sigmoid
 from pin_match.matchers.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
 from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
 from pin_match.matchers.fitted import FittedFileSpec, read_fitted_file
@@ -128,7 +129,7 @@ class VerifyConfig(MatcherConfig):
 class Reference:
     """The target as the zoomed signals see it: one descriptor per view, the views' mask cells, their colours."""
 
-    descriptors: torch.Tensor  # (V, D) foreground averages
+    descriptors: torch.Tensor  # (V, D) foreground averages, unit length: every candidate is compared with them
     cells: torch.Tensor        # (R, D) cells on the masks
     cell_views: torch.Tensor   # (R,) the view of each
     histogram: np.ndarray      # HSV histogram of every view's masked pixels
@@ -185,7 +186,7 @@ def verdict(spec: dict[str, Any], signals: dict[str, float]) -> float:
     gate = spec["gate"]
     if gate["floor"]:
         logit += float(gate["coef"]) * color_shortfall(signals["color"], float(gate["floor"]))
-    return 1.0 / (1.0 + math.exp(-min(max(logit, -60.0), 60.0)))
+    return float(sigmoid(logit))
 
 
 @register_matcher("verify")
@@ -247,6 +248,10 @@ class VerifyMatcher(CompositeMatcher):
     def weights_hint(self, role: str) -> str:
         return f"set {role}_cfg.weights=" if role != "zoom" else "set locate_cfg.weights="
 
+    def roles_to_prepare(self) -> tuple[str, ...]:
+        # the zoom part lends its network only (the references are cut and embedded below); keypoints when used
+        return ("locate", "keypoints") if "keypoints" in self.cfg.signals else ("locate",)
+
     def _prepare(self, target: Target) -> None:
         super()._prepare(target)
         backbone = self.zoomer.backbone
@@ -265,7 +270,8 @@ class VerifyMatcher(CompositeMatcher):
             cells.append(feats[i, keep])
             views.append(torch.full((len(keep),), i))
         hist = sum(color_histogram(v[..., :3], v[..., 3] / 255.0, self.cfg.color_bins) for v in target.views)
-        self._reference = Reference(descriptors=masked_mean(feats, torch.stack(alphas)), cells=torch.cat(cells),
+        descriptors = F.normalize(masked_mean(feats, torch.stack(alphas)), dim=-1)
+        self._reference = Reference(descriptors=descriptors, cells=torch.cat(cells),
                                     cell_views=torch.cat(views), histogram=hist / len(target.views),
                                     aspect=float(np.median(aspects)))
 
@@ -308,12 +314,12 @@ class VerifyMatcher(CompositeMatcher):
 
     def _zoom_signals(self, crop: np.ndarray, cells: torch.Tensor) -> dict[str, float]:
         ref = self.reference
-        likeness = (F.normalize(cells, dim=-1) @ F.normalize(ref.descriptors, dim=-1).T).amax(1)
+        likeness = (F.normalize(cells, dim=-1) @ ref.descriptors.T).amax(1)
         weight = (likeness - likeness.median()).clamp(min=0)
         if float(weight.sum()) <= 0:
             weight = torch.ones_like(weight)
         descriptor = masked_mean(cells, weight)
-        desc = float((F.normalize(descriptor, dim=0) @ F.normalize(ref.descriptors, dim=-1).T).max())
+        desc = float((F.normalize(descriptor, dim=0) @ ref.descriptors.T).max())
         cycle = part_matches(ref.cells, ref.cell_views, cells, "mutual", 1.0)[0]
         grid = self.zoomer.backbone.grid
         pixels = cv2.resize(weight.reshape(grid, grid).numpy().astype(np.float32), (crop.shape[1], crop.shape[0]),

@@ -336,6 +336,25 @@ def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
     assert zoom_passes == [] and rows[0][1]["proto"] == pytest.approx(effnet.match(image).score, abs=1e-6)
 
 
+def test_prepare_prepares_the_locate_part_and_the_keypoint_part_only_when_its_signal_is_used(tiny_frameset,
+                                                                                            monkeypatch):
+    """The zoom part lends verify its network (the references are cut and embedded by verify itself), and the
+    keypoint part is built for the id but used only with its signal: neither is prepared for nothing."""
+    from pin_match.contract import Matcher
+
+    prepared, original = [], Matcher.prepare
+    monkeypatch.setattr(Matcher, "prepare", lambda self, target: prepared.append(self) or original(self, target))
+    target = tiny_frameset.target(tiny_frameset.episodes.target_object_id.iloc[0])
+    default = create_matcher("verify")
+    default.prepare(target)
+    assert prepared == [default, default.locator]
+    prepared.clear()
+    every = create_matcher("verify", signals=SIGNALS)
+    every.prepare(target)
+    assert prepared == [every, every.locator, every.keypointer]
+    assert default.reference.descriptors.norm(dim=-1).sub(1).abs().max() < 1e-6  # unit length, compared as they are
+
+
 def test_contract_with_real_weights(tmp_path):
     matcher = create_matcher("verify", **FAST)
     path = verifier_file(tmp_path / "v.json", matcher.signals_id, {s: 1.0 for s in FAST["signals"]})
