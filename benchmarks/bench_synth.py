@@ -17,7 +17,10 @@ from benchmarks.timing import once
 
 def _time_frames(n: int) -> float:
     """Seconds per rendered episode frame (render + mask + camera effects + encoding), one process."""
+    import numpy as np
+
     from pin_match.data.compose import stable_seed
+    from pin_match.data.synth.clutter import choose_scanned
     from pin_match.data.synth.generate import EpisodePlan, plan_episodes, render_episode
     from pin_match.data.synth.objects import make_objects
     from pin_match.data.synth.scans import ScanFolder
@@ -25,9 +28,11 @@ def _time_frames(n: int) -> float:
     specs = make_objects(ScanFolder.open(), 4)
     episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]
     roles = ("target",) + tuple("same_category" if o.category == objs[0].category else "other" for o in objs[1:])
+    clutter = choose_scanned([s for s in specs if s.split == split], objs,
+                             np.random.default_rng(stable_seed(0, "clutter", episode_id)))
     with tempfile.TemporaryDirectory() as tmp:
         plan = EpisodePlan(episode_id, split, scene_id, stable_seed(0, "scene", scene_id),
-                           stable_seed(0, "episode", episode_id), tuple(objs), roles, n, tmp)
+                           stable_seed(0, "episode", episode_id), tuple(objs), roles, n, tmp, tuple(clutter))
         render_episode(plan)  # warm-up: first pybullet connection
         return once(lambda: render_episode(plan)).wall_s / n
 
@@ -38,8 +43,8 @@ def _time_references(n: int) -> float:
     from pin_match.data.synth.scans import ScanFolder
 
     specs = make_objects(ScanFolder.open(), 2)[::2][:n]
-    render_object(specs[0])
-    return once(lambda: [render_object(s) for s in specs]).wall_s / len(specs)
+    render_object(specs[0], seed=0)
+    return once(lambda: [render_object(s, seed=0) for s in specs]).wall_s / len(specs)
 
 
 def _time_generate(workers: int, settings: dict) -> tuple[float, str, int]:

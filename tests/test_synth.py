@@ -135,6 +135,76 @@ def test_shipped_plans_keep_splits_and_give_every_target_a_sibling(shipped):
         assert {objs[0].category for _, sp, _, objs in plans if sp == split} == families, split
 
 
+def test_distractor_counts_follow_pins_val_episodes(shipped):
+    """3 siblings in 9 episodes of 10 where the family has them (PIN: 2.90 on average, at most 3), else all of them;
+    4 to 10 others, 7.19 on average (PIN's)."""
+    from pin_match.data.synth.generate import plan_episodes
+
+    specs = make_objects(shipped, 5)
+    same, other, room = [], [], []
+    for _, split, _, objs in plan_episodes(specs, seed=1, episodes=2000):
+        members = sum(s.category == objs[0].category and s.split == split for s in specs)
+        same.append(sum(o.category == objs[0].category for o in objs[1:]))
+        other.append(len(objs) - 1 - same[-1])
+        room.append(members - 1)
+    same, other, room = np.array(same), np.array(other), np.array(room)
+    assert (same[room < 3] == room[room < 3]).all()  # a family of 2 or 3 brings every sibling
+    assert set(same[room >= 3]) == {2, 3} and same[room >= 3].mean() == pytest.approx(2.90, abs=0.04)
+    assert other.min() == 4 and other.max() == 10 and other.mean() == pytest.approx(7.19, abs=0.1)
+
+
+def test_scanned_clutter_is_never_of_the_target_family_nor_already_in_the_episode(shipped):
+    from pin_match.data.synth.clutter import SCANNED, choose_scanned
+    from pin_match.data.synth.generate import plan_episodes
+
+    specs = make_objects(shipped, 5)
+    for episode_id, split, _, objs in plan_episodes(specs, seed=0, episodes=30):
+        pool = [s for s in specs if s.split == split]
+        clutter = choose_scanned(pool, objs, np.random.default_rng(len(episode_id)))
+        assert SCANNED[0] <= len(clutter) <= SCANNED[1]
+        assert all(c.category != objs[0].category and c.split == split for c in clutter), episode_id
+        assert not {c.object_id for c in clutter} & {o.object_id for o in objs}, episode_id
+
+
+def test_a_colour_double_wears_only_the_colours_of_the_surface():
+    """A box whose UVs use only the red half of a red and blue texture: its double's patches are red, never blue."""
+    from pin_match.data.synth.clutter import colour_double
+    from pin_match.data.synth.shapes import box
+
+    texture = np.zeros((256, 256, 3), np.uint8)
+    texture[:, :128] = (220, 20, 20)
+    texture[:, 128:] = (20, 20, 220)
+    mesh = box(0.1, 0.05, 0.2)
+    mesh.uvs = mesh.uvs * [0.4, 1.0]  # u in [0, 0.4]: the left, red half (with a margin for the patch)
+    for seed in range(5):
+        shape, atlas = colour_double(mesh, texture, np.random.default_rng(seed))
+        assert (atlas[..., 0] > 200).all() and (atlas[..., 2] < 40).all(), seed
+        lo, hi = shape.bounds
+        assert lo[2] == pytest.approx(0.0) and 0.15 <= hi[2] <= 0.25  # stands on z = 0, about the object's height
+        assert np.allclose((lo[:2] + hi[:2]) / 2, 0.0, atol=1e-9)
+
+
+def test_a_neutral_sensor_keeps_the_picture_and_a_house_camera_changes_it():
+    from pin_match.data.synth.sensor import Sensor, develop_view, house_camera, reference_camera
+
+    image = np.random.default_rng(0).integers(0, 256, (64, 48, 3), dtype=np.uint8)
+    neutral = Sensor((1.0, 1.0, 1.0), 1.0, 1.0, 1.0, 0.0, 0.0, (0.0, 0.0))
+    assert np.abs(neutral.develop(image, np.random.default_rng(1)).astype(int) - image).max() <= 1
+    camera = house_camera(np.random.default_rng(2))
+    a, b = (camera.develop(image, np.random.default_rng(3)) for _ in range(2))
+    assert np.array_equal(a, b) and a.shape == image.shape and a.dtype == np.uint8  # the noise is the rng's
+    assert np.abs(a.astype(int) - image).mean() > 3
+    import cv2
+
+    data = camera.encode(a, np.random.default_rng(4))
+    assert data[:2] == b"\xff\xd8" and cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR).shape == a.shape
+    view = np.dstack([image, np.where(np.arange(48) < 24, 0, 255)[None, :].repeat(64, 0).astype(np.uint8)])
+    view[..., :3][view[..., 3] == 0] = 255
+    out = develop_view(reference_camera(np.random.default_rng(5)), view, np.random.default_rng(6))
+    assert np.array_equal(out[..., 3], view[..., 3]) and (out[:, :24, :3] == 255).all()
+    assert not np.array_equal(out[:, 24:, :3], view[:, 24:, :3])
+
+
 # ---------------------------------------------------------------- the rendered set
 def test_episodes_stay_in_their_split_with_a_same_family_distractor(synth):
     objects = synth.objects
@@ -147,7 +217,7 @@ def test_episodes_stay_in_their_split_with_a_same_family_distractor(synth):
         other = [o for o in ep.distractor_object_ids if category[o] != ep.target_category]
         assert category[ep.target_object_id] == ep.target_category
         assert 1 <= len(same) <= 3, ep.episode_id
-        assert 5 <= len(other) <= 10, ep.episode_id
+        assert 4 <= len(other) <= 10, ep.episode_id
 
 
 def test_objects_csv_names_each_scan_and_its_licence(synth, shipped):
@@ -316,6 +386,64 @@ def test_small_objects_stand_high_in_generated_rooms():
             assert any(s.z == z and s.x0 + size[0] <= x <= s.x1 - size[0] and s.y0 + size[0] <= y <= s.y1 - size[0]
                        for s in high), seed
     assert rooms_with_a_high_surface >= 15  # every room starts with a table and a shelf; a few do not fit
+
+
+def _wrapped(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
+
+
+def test_products_face_the_room():
+    """The side the first reference view shows turns to where the furniture's front looks, on the floor away from a
+    wall it stands by, within 45 degrees either way; on a rug, which has no front, the yaw is free."""
+    from pin_match.data.synth.scene import (
+        FACE_SPREAD,
+        FLOOR_BANDS,
+        FRONT_AZIMUTH,
+        WALL_FACING,
+        Room,
+        Surface,
+        place_objects,
+    )
+
+    room = Room(5.0, 5.0, surfaces=[Surface(1.0, 4.4, 3.0, 4.9, 0.8, 2.0, "cabinet", -np.pi / 2),
+                                    Surface(2.0, 2.0, 2.8, 2.8, 0.012, 2.0, "rug")],
+                footprints=[(1.0, 4.4, 3.0, 4.9)])
+    # small products go high (the cabinet), the middle-sized to the cabinet or the rug, the large fit on neither
+    sizes = [(0.04, 0.1, 0.005)] * 20 + [(0.15, 0.3, 0.05)] * 4 + [(0.45, 0.5, 0.3)] * 5
+    spots = place_objects(room, sizes, np.random.default_rng(0))
+    kinds = {"cabinet": [], "floor": [], "rug": []}
+    for (x, y, z, yaw), (radius, _, _) in zip(spots, sizes):
+        front = yaw + FRONT_AZIMUTH  # where the first reference view's side looks in the room
+        if z == 0.8:
+            kinds["cabinet"].append(_wrapped(front + np.pi / 2))
+        elif z == 0.0:
+            reach = radius + 0.05 + FLOOR_BANDS[0] + 1e-9
+            near = [f for f, d in zip(WALL_FACING, (y, 5.0 - y, x, 5.0 - x)) if d <= reach]
+            kinds["floor"].append(min(abs(_wrapped(front - f)) for f in near))
+        else:
+            kinds["rug"].append(_wrapped(front))
+    assert len(kinds["cabinet"]) == 20 and len(kinds["floor"]) >= 5 and len(kinds["rug"]) >= 2
+    assert max(abs(a) for a in kinds["cabinet"] + kinds["floor"]) <= FACE_SPREAD + 1e-9
+    assert max(abs(a) for a in kinds["cabinet"]) > np.radians(30)  # spread, not one fixed angle
+
+
+@pytest.mark.parametrize("seed", range(10))
+def test_furniture_surfaces_face_away_from_their_wall(seed):
+    from pin_match.data.synth.scene import make_room
+
+    room = make_room(np.random.default_rng(seed))
+    checked = 0
+    for s in room.surfaces:
+        cx, cy = (s.x0 + s.x1) / 2, (s.y0 + s.y1) / 2
+        if s.kind == "rug":
+            assert s.facing is None
+            continue
+        if min(cx, cy, room.width - cx, room.depth - cy) < 0.6:  # against a wall: its back is to the wall
+            ahead = [(cx + step * np.cos(s.facing), cy + step * np.sin(s.facing)) for step in (0.8, -0.8)]
+            inside = [0 < x < room.width and 0 < y < room.depth for x, y in ahead]
+            assert inside == [True, False], (s.kind, s.facing)
+            checked += 1
+    assert checked >= 2
 
 
 @pytest.mark.slow

@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.intervals import episode_weights, percentile_interval, unit_codes, weighted_auroc
-from pin_match.evaluation.labels import CM, TM, frame_classes
+from pin_match.evaluation.labels import CM, GM, TM, frame_classes
 from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap, auroc
 from pin_match.evaluation.paired import align
 
@@ -47,11 +47,9 @@ def class_pixels(frames: pd.DataFrame, visibility: pd.DataFrame) -> np.ndarray:
     target, largest = by_role.sum(), by_role.max()
     out = np.zeros(len(frames), np.float64)
     cls = frame_classes(frames)
-    for role, code, table in (("target", TM, target), ("same_category", CM, largest)):
+    for role, code, table in (("target", TM, target), ("same_category", CM, largest), ("other", GM, largest)):
         rows = cls == code
         out[rows] = frames.frame_id[rows].map(table.get(role, pd.Series(dtype=float))).to_numpy(np.float64)
-    other = ~np.isin(cls, (TM, CM)) & frames["other_visible"].to_numpy(bool)
-    out[other] = frames.frame_id[other].map(largest.get("other", pd.Series(dtype=float))).to_numpy(np.float64)
     return np.nan_to_num(out, nan=0.0)
 
 
@@ -108,8 +106,7 @@ def size_table(scored: pd.DataFrame, visibility: pd.DataFrame, sigma: float,
     score = frames.score.to_numpy(np.float64)
     matched = score >= sigma
     first = _first_matches(frames, matched)
-    hit = np.zeros(len(frames), bool) if hits is None else \
-        frames.frame_id.map(hits.set_index("frame_id").hit).fillna(False).to_numpy(bool)
+    hit = frames.frame_id.isin([] if hits is None else hits.frame_id[hits.hit]).to_numpy(bool)
     rows = {}
     for name, sel in [*((b, band == k) for k, b in enumerate(BANDS)), (ALL, np.ones(len(frames), bool))]:
         tm, cm, m = sel & (cls == TM), sel & (cls == CM), sel & matched

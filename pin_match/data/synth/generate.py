@@ -10,26 +10,30 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
-import cv2
 import numpy as np
 
 from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import CameraModel, EpisodeGeometry
 from pin_match.data.geometry import Pose as CameraPose
+from pin_match.data.synth.clutter import choose_scanned, colour_double
 from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
-from pin_match.data.synth.scene import make_room, place_objects
+from pin_match.data.synth.scene import Room, make_room, place_objects
+from pin_match.data.synth.sensor import develop_view, house_camera, reference_camera
 from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.size import DEFAULT_SIZE, SynthSize
 from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk, geodesic_lengths
-from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ObjectOrigin, encode_frame
+from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 4  # 4: camera poses, object positions and geodesic lengths recorded (frames unchanged)
+GENERATOR_VERSION = 5  # 5: PIN's distractor counts, clutter, a camera model, products facing the room, equal runs
+SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
+OTHER_RANGE, PIN_OTHER = (4, 10), 7.19  # other-category ones: at most 10, 7.19 on average (PIN's supplementary)
 
 
 @dataclass(frozen=True)
@@ -45,15 +49,17 @@ class EpisodePlan:
     roles: tuple[str, ...]
     frames: int
     staging: str
+    clutter: tuple[ObjectSpec, ...] = ()  # scanned products in the room that are background (``clutter``)
 
 
 def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tuple[str, str, str, list[ObjectSpec]]]:
     """(episode id, split, scene id, [target, distractors...]) per episode; half train, half val.
 
     Targets cycle through a shuffled order of the split's families that have a look-alike in it
-    (two members or more), so a split's episodes cover the families evenly; same-category
-    distractors are up to 3 siblings (3 most of the time, as PIN's 2.90 average), other-category
-    distractors 5 to 10 instances of other families.
+    (two members or more), so a split's episodes cover the families evenly. Distractor counts are
+    drawn as PIN's val episodes hold them: 3 siblings with probability 0.9, else 2 (mean 2.90, at
+    most 3), all of them where the family has fewer; 4 to 10 instances of other families, 4 plus a
+    binomial draw of mean 3.19 (mean 7.19, at most 10).
     """
     out = []
     n_val = episodes // 2
@@ -70,15 +76,19 @@ def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tup
             same = [s for s in pool if s.category == category]
             target = same[(i // len(order)) % len(same)]
             siblings = [s for s in same if s is not target]
-            k = min(3, len(siblings))
-            if k > 1 and rng.random() < 0.25:
-                k = int(rng.integers(1, k + 1))
+            short = int(rng.random() >= PIN_SAME - (SAME_MAX - 1))  # one episode in ten holds one fewer
+            k = min(SAME_MAX - short, len(siblings))
             others = [s for s in pool if s.category != category]
-            n_other = min(len(others), int(rng.integers(5, 11)))
+            n_other = min(len(others), _other_count(rng))
             chosen = [siblings[j] for j in sorted(rng.choice(len(siblings), k, replace=False))]
             chosen += [others[j] for j in sorted(rng.choice(len(others), n_other, replace=False))]
             out.append((f"{split}_{i:03d}", split, f"{split}_scene_{i % n_scenes:02d}", [target, *chosen]))
     return out
+
+
+def _other_count(rng: np.random.Generator) -> int:
+    low, high = OTHER_RANGE
+    return low + int(rng.binomial(high - low, (PIN_OTHER - low) / (high - low)))
 
 
 # ------------------------------------------------------------------ worker side
@@ -92,9 +102,12 @@ def _renderer() -> Renderer:
     return _RENDERER
 
 
-def render_object(spec: ObjectSpec) -> list[np.ndarray]:
+def render_object(spec: ObjectSpec, seed: int) -> list[np.ndarray]:
+    """The object's reference views, through a reference camera of its own (drawn from the seed and its id)."""
     scan = spec.load()
-    return reference_views(_renderer(), scan.mesh, scan.texture)
+    rng = np.random.default_rng(stable_seed(seed, "reference", spec.object_id))
+    camera = reference_camera(rng)
+    return [develop_view(camera, view, rng) for view in reference_views(_renderer(), scan.mesh, scan.texture)]
 
 
 def episode_light(rng: np.random.Generator) -> Light:
@@ -111,16 +124,6 @@ def episode_light(rng: np.random.Generator) -> Light:
     return Light(direction=(float(rng.uniform(-1, 1)), float(rng.uniform(-1, 1)), float(rng.uniform(0.6, 2.0))),
                  colour=tuple(float(c) for c in colour), ambient=float(rng.uniform(0.6, 0.75)),
                  diffuse=float(rng.uniform(0.25, 0.4)), specular=float(rng.uniform(0.02, 0.1)))
-
-
-def _camera_look(image: np.ndarray, gain: float, rng: np.random.Generator) -> np.ndarray:
-    """A camera's imperfections on the rendered image: exposure, slight lens softness, sensor noise.
-
-    Only the RGB is touched; masks and depth stay the renderer's exact buffers.
-    """
-    img = cv2.GaussianBlur(image.astype(np.float32), (0, 0), 0.6) * gain
-    img += rng.normal(0, 2.5, img.shape).astype(np.float32)
-    return np.clip(np.round(img), 0, 255).astype(np.uint8)
 
 
 def _camera(pose: Pose) -> Camera:
@@ -153,6 +156,53 @@ def _episode_geometry(plan: EpisodePlan, room, obstacles, walk: list[Pose],
                            {ids[k]: length for k, length in zip(measured, lengths)})
 
 
+@dataclass
+class _Stage:
+    """What an episode's objects became in the renderer: the mask values of the annotated ones (clutter stays 0),
+    the objects the walk approaches, the floor it walks around and each annotated object's centre."""
+
+    lut: np.ndarray  # body id + 1 -> mask value
+    legend: dict[int, tuple[str, str]]
+    looks: dict[str, list[Goal]]
+    bodies: dict[Goal, int]
+    obstacles: list[tuple[float, float, float, float]]
+    centres: list[tuple[float, float, float]]
+
+
+def _footprint(mesh: Mesh) -> tuple[float, float, float]:
+    """(radius, height, side area): what placement needs of an object."""
+    lo, hi = mesh.bounds
+    return float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2]), mesh.side_area()
+
+
+def _stage(r: Renderer, room: Room, plan: EpisodePlan, rng: np.random.Generator) -> _Stage:
+    """Place the episode's objects (target first), then its clutter: a colour double of each object and the scanned
+    products, so the annotated objects have the pick of the surfaces."""
+    built = [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.objects)]
+    built += [colour_double(mesh, texture, rng) for mesh, texture in built]
+    built += [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.clutter)]
+    sizes = [_footprint(mesh) for mesh, _ in built]
+    lookalikes = frozenset(k for k, role in enumerate(plan.roles) if role == "same_category")
+    spots = place_objects(room, sizes, rng, lookalikes)
+    stage = _Stage(np.zeros(0, np.uint16), {}, {"target": [], "same_category": []}, {}, list(room.footprints), [])
+    values = {}  # body id -> mask value, for the episode's objects only
+    for k, ((mesh, atlas), (x, y, z, yaw)) in enumerate(zip(built, spots)):
+        body = r.add(mesh, atlas, (x, y, z), yaw)
+        if z < 0.05:  # on the floor or a rug: the camera walks around it
+            rad = sizes[k][0]
+            stage.obstacles.append((x - rad, y - rad, x + rad, y + rad))
+        if k < len(plan.objects):
+            values[body] = k + 1
+            stage.legend[k + 1] = (plan.objects[k].object_id, plan.roles[k])
+            stage.centres.append((float(x), float(y), float(z + sizes[k][1] / 2)))  # meshes are centred on x, y
+            if plan.roles[k] in stage.looks:
+                stage.looks[plan.roles[k]].append(_look(mesh, (x, y, z)))
+                stage.bodies[stage.looks[plan.roles[k]][-1]] = body
+    stage.lut = np.zeros(body + 2, np.uint16)  # bodies are numbered in order: the last one added is the highest
+    stage.lut[[b + 1 for b in values]] = list(values.values())
+    return stage
+
+
 def render_episode(plan: EpisodePlan) -> tuple[list[FrameRecord], EpisodeGeometry]:
     r = _renderer()
     r.reset()
@@ -160,50 +210,27 @@ def render_episode(plan: EpisodePlan) -> tuple[list[FrameRecord], EpisodeGeometr
     for piece in room.pieces:
         r.add(piece.mesh, piece.texture)
     rng = np.random.default_rng(plan.seed)
-    built = [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.objects)]
-    sizes = []
-    for mesh, _ in built:
-        lo, hi = mesh.bounds
-        sizes.append((float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2]), mesh.side_area()))
-    lookalikes = frozenset(k for k, role in enumerate(plan.roles) if role == "same_category")
-    spots = place_objects(room, sizes, rng, lookalikes)
-    lut = np.zeros(1, np.uint16)
-    legend = {}
-    looks: dict[str, list[Goal]] = {"target": [], "same_category": []}
-    bodies: dict[Goal, int] = {}
-    obstacles = list(room.footprints)
-    centres = []
-    for k, ((mesh, atlas), (x, y, z, yaw), spec, role) in enumerate(zip(built, spots, plan.objects, plan.roles)):
-        body = r.add(mesh, atlas, (x, y, z), yaw)
-        centres.append((float(x), float(y), float(z + sizes[k][1] / 2)))  # meshes are centred on x, y
-        if body + 2 > len(lut):
-            lut = np.concatenate([lut, np.zeros(body + 2 - len(lut), np.uint16)])
-        lut[body + 1] = k + 1
-        legend[k + 1] = (spec.object_id, role)
-        if role in looks:
-            looks[role].append(_look(mesh, (x, y, z)))
-            bodies[looks[role][-1]] = body
-        if z < 0.05:  # on the floor or a rug: the camera walks around it
-            rad = sizes[k][0]
-            obstacles.append((x - rad, y - rad, x + rad, y + rad))
+    stage = _stage(r, room, plan, rng)
     light = episode_light(rng)
-    gain = float(rng.uniform(0.9, 1.1))
+    camera = house_camera(rng)
     vfov = vertical_fov(HFOV, FRAME_WIDTH, FRAME_HEIGHT)
     records = []
 
     def sight(look: Goal, pose: Pose) -> float:
         """Pixels of the object seen from ``pose``, from a render at a quarter of the frame's size."""
         ids = r.render(_camera(pose), FRAME_WIDTH // 4, FRAME_HEIGHT // 4, vfov, light)[1]
-        return 16.0 * float((ids == bodies[look]).sum())
+        return 16.0 * float((ids == stage.bodies[look]).sum())
 
-    walk = camera_walk(room, obstacles, looks["target"][0], looks["same_category"], plan.frames, rng, sight)
+    walk = camera_walk(room, stage.obstacles, stage.looks["target"][0], stage.looks["same_category"], plan.frames,
+                       rng, sight)
     for step, pose in enumerate(walk):
         rgb, ids, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
-        mask = lut[np.clip(ids + 1, 0, len(lut) - 1)]
-        image = _camera_look(rgb, gain, np.random.default_rng(stable_seed(plan.seed, "noise", step)))
-        records.append(encode_frame(plan.staging, plan.episode_id, step,
-                                    Frame(image, mask, legend, depth, _camera_pose(pose))))
-    return records, _episode_geometry(plan, room, obstacles, walk, centres)
+        noise = np.random.default_rng(stable_seed(plan.seed, "noise", step))
+        image = camera.develop(rgb, noise)
+        frame = Frame(image, stage.lut[ids + 1], stage.legend, depth, _camera_pose(pose))
+        records.append(encode_frame(plan.staging, plan.episode_id, step, frame,
+                                    ImageFile(".jpg", camera.encode(image, noise))))  # stored: the camera's JPEG
+    return records, _episode_geometry(plan, room, stage.obstacles, walk, stage.centres)
 
 
 # ------------------------------------------------------------------ entry point
@@ -237,8 +264,8 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
         pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
         try:
             imap = pool.imap if pool else map
-            rendered = tqdm(imap(render_object, specs), total=len(specs), desc="render objects", unit="object",
-                            disable=not progress, dynamic_ncols=True)
+            rendered = tqdm(imap(partial(render_object, seed=seed), specs), total=len(specs), desc="render objects",
+                            unit="object", disable=not progress, dynamic_ncols=True)
             for spec, views in zip(specs, rendered):
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions),
                                   origin=ObjectOrigin(spec.source, spec.licence))
@@ -246,10 +273,12 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
             for episode_id, split, scene_id, objs in plan_episodes(specs, seed, size.episodes):
                 writer.add_episode(episode_id, split, scene_id, objs[0].object_id, [o.object_id for o in objs[1:]])
                 roles = writer.roles(episode_id)
+                clutter = choose_scanned([s for s in specs if s.split == split], objs,
+                                         np.random.default_rng(stable_seed(seed, "clutter", episode_id)))
                 plans.append(EpisodePlan(episode_id, split, scene_id, stable_seed(seed, "scene", scene_id),
                                          stable_seed(seed, "episode", episode_id),
                                          tuple(objs), tuple(roles[o.object_id] for o in objs), size.frames_per_episode,
-                                         str(writer.staging)))
+                                         str(writer.staging), tuple(clutter)))
             for plan, (records, geometry) in zip(plans, tqdm(imap(render_episode, plans), total=len(plans),
                                                              desc="render episodes", unit="episode",
                                                              disable=not progress, dynamic_ncols=True)):

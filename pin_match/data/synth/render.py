@@ -15,6 +15,7 @@ import cv2
 import numpy as np
 import pybullet as p
 
+from pin_match.data.synth.scene import FRONT_AZIMUTH
 from pin_match.data.synth.shapes import Mesh
 
 NEAR, FAR = 0.03, 30.0
@@ -115,7 +116,8 @@ SUPERSAMPLE = 1.5  # 2.25 samples per pixel: soft alpha edges at about half the 
 
 def reference_views(renderer: Renderer, mesh: Mesh, atlas: np.ndarray,
                     size: tuple[int, int] = REFERENCE_SIZE) -> list[np.ndarray]:
-    """PIN's three views: frontal after a 30 degree yaw, the back, and from above, RGBA on transparent.
+    """PIN's three views: frontal after a 30 degree yaw (the side ``FRONT_AZIMUTH``, which placement turns to the
+    room), the back, and from above, RGBA on transparent.
 
     Rendered at 1.5 times the size and area-averaged down, so alpha is the true pixel coverage
     (soft edges), not a jagged 0/255 cut-out; colours are not premultiplied and RGB outside the
@@ -131,7 +133,7 @@ def reference_views(renderer: Renderer, mesh: Mesh, atlas: np.ndarray,
     dist = radius / np.sin(np.radians(vfov / 2)) * 1.05
     elev = np.radians(20)
     views = []
-    for azimuth, above in ((np.radians(-90 + 30), False), (np.radians(90 + 30), False), (0.0, True)):
+    for azimuth, above in ((FRONT_AZIMUTH, False), (FRONT_AZIMUTH + np.pi, False), (0.0, True)):
         if above:
             cam = Camera(tuple(centre + [0, 0, dist]), tuple(centre), (0.0, 1.0, 0.0))
         else:

@@ -19,7 +19,8 @@ WALL_HEIGHT = 2.6
 
 @dataclass(frozen=True)
 class Surface:
-    """A horizontal rectangle objects can stand on; ``clearance`` is the free height above it."""
+    """A horizontal rectangle objects can stand on; ``clearance`` is the free height above it; ``facing`` the
+    direction (radians) its furniture's front looks into the room, None where it has no front (a rug)."""
 
     x0: float
     y0: float
@@ -28,6 +29,7 @@ class Surface:
     z: float
     clearance: float = 2.0
     kind: str = "floor"
+    facing: float | None = None
 
     @property
     def area(self) -> float:
@@ -70,10 +72,15 @@ def _rotate_layout(specs, surfaces, w: float, d: float, quarter: int, x: float, 
             sx, sy = sy, sx
         placed.append(((sx, sy, sz), (*tr(cx, cy), cz)))
     surf = []
+    facing = _wrap(-np.pi / 2 + quarter * np.pi / 2)  # the local front (-y) after the quarter turns
     for s in surfaces:
         (ax, ay), (bx, by) = tr(s.x0, s.y0), tr(s.x1, s.y1)
-        surf.append(Surface(min(ax, bx), min(ay, by), max(ax, bx), max(ay, by), s.z, s.clearance, s.kind))
+        surf.append(Surface(min(ax, bx), min(ay, by), max(ax, bx), max(ay, by), s.z, s.clearance, s.kind, facing))
     return placed, surf
+
+
+def _wrap(angle: float) -> float:
+    return float((angle + np.pi) % (2 * np.pi) - np.pi)
 
 
 def _furniture(kind: str, rng: np.random.Generator):
@@ -261,6 +268,11 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     allows it, as PIN's look-alikes stand elsewhere in the house: an agent that stops at a
     look-alike is then more than PIN's 1 m success distance from the target, a category error
     and not a success.
+
+    Products face the room, as they stand in a house: the side the first reference view shows
+    (``FRONT_AZIMUTH`` of the object) is turned to where its furniture's front looks, or away from
+    the wall it stands against, give or take ``FACE_SPREAD``; on a rug, which has no front, the
+    yaw is uniform.
     """
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
@@ -272,16 +284,19 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
         if spot is None:
             raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
                              f"{room.width:.1f} x {room.depth:.1f} m room")
-        taken.append((spot[0], spot[1], spot[2], radius))
-        out.append((*spot, float(rng.uniform(-np.pi, np.pi))))
+        x, y, z, facing = spot
+        taken.append((x, y, z, radius))
+        turn = float(rng.uniform(-1.0, 1.0))
+        out.append((x, y, z, turn * np.pi if facing is None else _wrap(facing - FRONT_AZIMUTH + turn * FACE_SPREAD)))
     return out
 
 
 Away = tuple[float, float, float] | None  # (x, y, least distance) a spot must keep from, or no constraint
+Spot = tuple[float, float, float, float | None]  # x, y, z and the direction the spot faces the room (or None)
 
 
 def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float, float, float, float]],
-          rng: np.random.Generator, away: Away) -> tuple[float, float, float] | None:
+          rng: np.random.Generator, away: Away) -> Spot | None:
     """A surface spot (a high one first for a small product), else the floor along a wall; None if neither."""
     radius, height, side_area = size
     weights = np.array([np.sqrt(s.area) for s in room.surfaces])
@@ -294,7 +309,7 @@ def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float,
     spot = spot or _surface_spot(room, weights * fits, radius, taken, rng, away)
     if spot is None:
         floor = _floor_spot(room, radius, taken, rng, away)
-        spot = None if floor is None else (*floor, 0.0)
+        spot = None if floor is None else (floor[0], floor[1], 0.0, floor[2])
     return spot
 
 
@@ -303,14 +318,15 @@ def _far(x: float, y: float, away: Away) -> bool:
 
 
 def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
-                  rng: np.random.Generator, away: Away = None) -> tuple[float, float, float] | None:
-    """A free spot (x, y, z) on a surface drawn with weights ``p``, clear of the objects already placed; or None."""
+                  rng: np.random.Generator, away: Away = None) -> Spot | None:
+    """A free spot (x, y, z, facing) on a surface drawn with weights ``p``, clear of the objects already placed; or
+    None."""
     for _ in range(200 if p.sum() else 0):
         s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
         x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
         if _far(x, y, away) and all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
                                     for ox, oy, z, r in taken):
-            return float(x), float(y), float(s.z)
+            return float(x), float(y), float(s.z), s.facing
     return None
 
 
@@ -319,11 +335,15 @@ SMALL_AREA = 0.01  # m^2 seen side-on: a supplement bottle (0.004), an ink box (
 SMALL_MIN_HEIGHT = 0.78  # cabinets and the upper shelf boards: shallow, so a camera can stand within 0.6 m
 FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
 LOOKALIKE_GAP = 2.2  # metres between the target and a look-alike: more than PIN's 1 m success distance twice over
+FRONT_AZIMUTH = np.radians(-60.0)  # the side of an object its first reference view shows (render.reference_views)
+FACE_SPREAD = np.radians(45.0)  # how far a product's front may turn from the room-facing direction, either way
+WALL_FACING = (np.pi / 2, -np.pi / 2, 0.0, np.pi)  # into the room from the walls y = 0, y = D, x = 0, x = W
 
 
 def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float, float]],
-                rng: np.random.Generator, away: Away = None, tries: int = 500) -> tuple[float, float] | None:
-    """A free floor position for an object of ``radius``, clear of furniture and other objects; None if none.
+                rng: np.random.Generator, away: Away = None, tries: int = 500) -> tuple[float, float, float] | None:
+    """A free floor position (x, y, the direction into the room from its wall) for an object of ``radius``, clear of
+    furniture and other objects; None if none.
 
     Close to a wall first, so the room's middle stays free for the camera walk; the band
     widens only when the walls are full.
@@ -340,5 +360,5 @@ def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float
                 continue
             if _far(x, y, away) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
                                         for ox, oy, z, r in taken):
-                return float(x), float(y)
+                return float(x), float(y), WALL_FACING[wall]
     return None

@@ -9,7 +9,8 @@ furniture or walls):
 1. a look-around on the spot;
 2. exploration: random places, until the frames the approaches need are all that is left
    of the episode (most of these frames show nothing relevant, as in a real exploration);
-3. a pass by a same-category look-alike: a straight approach to it, facing it;
+3. a pass by a same-category look-alike: a straight approach to it, facing it, drawn as the
+   target's (the same run to the same kind of stop spot, without the stop);
 4. the approach: from 1-1.75 m further out, straight at the target, one frame per step,
    to a stop distance at which the target fills a few thousand pixels (at most 1 m), then
    the stop: the camera tilts down or up in two steps to centre the target (as an agent's
@@ -43,8 +44,8 @@ MIN_STOP = 0.45  # the closest a stop may be (3D distance from the camera to the
 MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal distance)
 SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
 HALF_VFOV = np.radians(34.3)  # half the vertical field of view of the 640 x 360 portrait frame
-TARGET_RUN = (1.0, 1.75)  # the straight run at the target starts this far (metres) behind the stop ...
-LOOKALIKE_RUN = (0.5, 1.0)  # ... and at a look-alike passed on the way
+RUN = (1.0, 1.75)  # the straight run at an object starts this far (metres) behind its stop: the target and a
+# look-alike passed on the way alike, so neither is met larger by construction
 APPROACH_FRAMES = 40  # about what the two approaches take, walking there included; exploration gets the rest
 
 
@@ -173,8 +174,8 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
     walk.look_around(int(rng.integers(3, 7)))
     walk.explore(n_frames - APPROACH_FRAMES)
     if lookalikes:
-        walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], LOOKALIKE_RUN, stop=False)
-    walk.approach(target, TARGET_RUN, stop=True)
+        walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], RUN, stop=False)
+    walk.approach(target, RUN, stop=True)
     return walk.poses
 
 
