@@ -166,3 +166,16 @@ def test_cli_features(tiny_frameset, dino_cfg, tmp_path, capsys):
     assert opened.meta["split"] == "val" and len(opened.crops) == 8 and set(opened.crops.split) == {"val"}
     assert main(["features", str(tiny_frameset.root), "--backbone", "sift", "--out", str(tmp_path)]) == 2
     assert "has no patch features" in capsys.readouterr().err
+
+
+def test_a_build_on_a_local_dask_cluster_is_the_local_store(store, tiny_frameset, dino_cfg, tmp_path):
+    pytest.importorskip("distributed")
+    args = ["features", str(tiny_frameset.root), "--backbone", "dino", "--out", str(tmp_path), "--quiet",
+            "--weights", dino_cfg["weights"], "--cfg", "model_name=test_vit", "--cfg", "img_size=64",
+            "--scheduler", "local", "--workers", "1"]
+    assert main(args) == 0
+    got = FeatureStore.open(next(tmp_path.rglob("features_all.parquet")), tiny_frameset)
+    assert got.crops.equals(store.crops) and got.meta == store.meta
+    # a network's float sums may differ in the last bits with a worker's threads (scoring.cluster)
+    np.testing.assert_allclose(got.frames.astype(np.float32), store.frames.astype(np.float32), rtol=2e-3, atol=2e-3)
+    np.testing.assert_array_equal(got.patch_object, store.patch_object)

@@ -96,8 +96,8 @@ class FrameTokens(Product):
     of the store's reference arrays.
     """
 
-    grid: int = 0
-    dim: int = 0
+    grid: int
+    dim: int
     prefix: ClassVar[str] = "features"
 
     def folder(self, matcher: Matcher) -> str:
