@@ -13,7 +13,7 @@ val, CM at the tuned sigma at most half the frozen matcher's, training <= 10 min
 
 from __future__ import annotations
 
-from pathlib import Path
+import time
 
 import torch
 
@@ -59,6 +59,7 @@ def _print(title: str, rows: list[dict]) -> None:
 
 def run(quick: bool = False) -> dict:
     from pin_match.nn.head import load_head
+    from pin_match.scoring.options import RunOptions
     from pin_match.training import Backbone, TrainConfig, compare_with_frozen, scored_from_store, sigma_on_split, train
     from pin_match.training.config import default_backbone
     from pin_match.training.features import build_features
@@ -70,17 +71,18 @@ def run(quick: bool = False) -> dict:
     fs = synthetic("training_quick", **QUICK) if quick else synthetic(f"training_synth{SYNTH['episodes']}", **SYNTH)
 
     got: dict = {}  # what the timed calls return
+    started = time.time()
     build_s = once(lambda: got.update(store=build_features(fs, backbone, overrides=overrides, out=features,
-                                                           progress=False))).wall_s
+                                                           run=RunOptions(progress=False)))).wall_s
     store = got["store"]
-    size_mb = sum(p.stat().st_size for p in Path(store.root).iterdir()) / 2**20
-    meta = store.meta
-    extraction = dict(frames=meta["n_frames"], crops=meta["n_crops"], frames_per_second=meta["frames_per_second"],
-                      seconds_frames=meta["seconds_frames"], seconds_references=meta["seconds_references"],
-                      objects=len(store.objects), store_mb=round(size_mb, 1),
-                      cached=build_s < 0.5 * meta["seconds_frames"])
-    print(f"features {store.backbone_id}: {meta['n_frames']} frames ({meta['n_crops']} crops) at "
-          f"{meta['frames_per_second']:.3g} frames/s when built, references {meta['seconds_references']} s, "
+    size_mb = sum(p.stat().st_size for p in store.files()) / 2**20
+    n_frames = store.crops.frame_id.nunique()
+    built = store.path.stat().st_mtime >= started  # its table, written last, is new: this call built (or resumed) it
+    extraction = dict(frames=n_frames, crops=len(store.crops), seconds=round(build_s, 2), cached=not built,
+                      frames_per_second=round(n_frames / build_s, 3) if built else None, objects=len(store.objects),
+                      store_mb=round(size_mb, 1))
+    rate = f"built at {n_frames / build_s:.3g} frames/s, references included" if built else "found in the cache"
+    print(f"features {store.backbone_id}: {n_frames} frames ({len(store.crops)} crops), {rate}, "
           f"{extraction['store_mb']} MB")
 
     cfg = TrainConfig(epochs=3, hidden=32, threads=THREADS) if quick else TrainConfig(threads=THREADS)
@@ -113,7 +115,7 @@ def run(quick: bool = False) -> dict:
 
     real = None if quick else _real_frameset()
     if real is not None:
-        real_store = build_features(real, backbone, overrides=overrides, out=features, progress=False)
+        real_store = build_features(real, backbone, overrides=overrides, out=features, run=RunOptions(progress=False))
         split = sorted(set(real.frames.split))[0]
         res = compare_with_frozen(real, real_store, head, sigmas, split=split)
         out["real"] = [_row(n, res[n]) for n in ("frozen", "learned")]

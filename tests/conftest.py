@@ -143,7 +143,8 @@ def dino_cfg(tmp_path_factory):
 @pytest.fixture(scope="module")
 def store(tiny_frameset, dino_cfg, tmp_path_factory):
     """A feature store of the tiny frame-set under the tiny ViT."""
+    from pin_match.scoring.options import RunOptions
     from pin_match.training.features import build_features
 
     return build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path_factory.mktemp("features"),
-                          progress=False)
+                          run=RunOptions(progress=False))

@@ -1,4 +1,4 @@
-"""--scheduler on every command that scores through the engine: bench, carry and demo as score does (issue 53.2)."""
+"""--scheduler on every command that runs through the engine: bench, carry, demo, features, as score (issue 53.2)."""
 
 from __future__ import annotations
 
@@ -44,16 +44,18 @@ def _seen_run(monkeypatch, module, name: str) -> list:
     return runs
 
 
-@pytest.mark.parametrize("command", ["bench", "carry", "demo"])
+@pytest.mark.parametrize("command", ["bench", "carry", "demo", "features"])
 def test_the_scheduler_reaches_the_scoring_engine(command, tiny_frameset, tmp_path, monkeypatch, cluster, capsys):
     from pin_match import scoring
     from pin_match.evaluation import bench, demo
+    from pin_match.training import features
 
     fs = str(tiny_frameset.root)
     module, name, args = dict(
         bench=(bench, "bench", ["bench", fs, "--matcher", "color", "--out", str(tmp_path / "b")]),
         carry=(scoring, "score_many", ["carry", fs, fs, "--matcher", "color", "--cache", str(tmp_path / "s")]),
         demo=(demo, "demo", ["demo", "--out", str(tmp_path / "d"), "--no-lookalikes"]),
+        features=(features, "build_features", ["features", fs, "--backbone", "dino", "--out", str(tmp_path / "f")]),
     )[command]
     runs = _seen_run(monkeypatch, module, name)
     assert main([*args, "--quiet", "--workers", "1"]) == 2

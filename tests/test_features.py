@@ -1,8 +1,7 @@
-"""The feature store: tokens equal the backbone's, patch labels computed by hand, one store per frame-set, atomic."""
+"""The feature store: the backbone's tokens, patch labels by hand, one store per frame-set, resumed, damage named."""
 
 from __future__ import annotations
 
-import json
 import os
 from pathlib import Path
 
@@ -14,7 +13,11 @@ from pin_match.contract import ConfigError
 from pin_match.contract.crops import crop_boxes
 from pin_match.data.writer import FrameSetWriter
 from pin_match.matchers.patch import alpha_to_grid, patch_matcher
-from pin_match.training.features import FeatureStore, FeatureStoreError, build_features, patch_coverage
+from pin_match.scoring.options import RunOptions
+from pin_match.training.features import DamagedStoreError, FeatureStore, FeatureStoreError, build_features
+from pin_match.training.frame_tokens import FRAME_TOKENS, array_path, patch_coverage
+
+QUIET = RunOptions(progress=False)
 
 
 def test_tokens_are_the_backbones_on_every_crop_and_reference(store, tiny_frameset, dino_cfg):
@@ -63,11 +66,11 @@ def test_coverage_of_a_crop_not_divisible_by_the_grid():
 
 
 def test_the_store_is_reused_not_rebuilt(store, tiny_frameset, dino_cfg, monkeypatch):
-    out = store.root.parents[2]
-    stamp = os.stat(store.root / "frames.npy").st_mtime_ns
+    out = store.path.parents[2]
+    stamps = {path: os.stat(path).st_mtime_ns for path in store.files()}
     monkeypatch.setattr("pin_match.matchers.backbones.TimmBackbone.encode", lambda *a, **k: pytest.fail("backbone ran"))
-    again = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=out, progress=False)
-    assert again.root == store.root and os.stat(again.root / "frames.npy").st_mtime_ns == stamp
+    again = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=out, run=QUIET)
+    assert again.path == store.path and {path: os.stat(path).st_mtime_ns for path in again.files()} == stamps
 
 
 def test_a_store_for_another_frame_set_is_refused(store, tmp_path):
@@ -79,30 +82,78 @@ def test_a_store_for_another_frame_set_is_refused(store, tmp_path):
     w.add_frame("e", 0, np.zeros((64, 64, 3), np.uint8), np.zeros((64, 64), np.uint16), {})
     other = w.close()
     with pytest.raises(FeatureStoreError, match=rf"built for frame-set .*not for .*other.*{other.fingerprint}"):
-        FeatureStore.open(store.root, other)
+        FeatureStore.open(store.path, other)
 
 
 def test_a_matcher_without_patch_features_is_refused(tiny_frameset, tmp_path):
     with pytest.raises(ConfigError, match="matcher 'color' has no patch features"):
-        build_features(tiny_frameset, "color", out=tmp_path, progress=False)
+        build_features(tiny_frameset, "color", out=tmp_path, run=QUIET)
 
 
-def test_a_failed_build_leaves_nothing(tiny_frameset, dino_cfg, tmp_path, monkeypatch):
+def test_a_build_cut_off_resumes_from_its_chunks(store, tiny_frameset, dino_cfg, tmp_path, monkeypatch):
+    """Killed in the second episode: that episode's chunk and the store are absent, the first episode's chunk is
+    kept; the rebuild encodes only the second episode's frames and gives the uninterrupted store's arrays."""
     from pin_match.matchers.backbones import TimmBackbone
 
-    calls = {"n": 0}
-    real = TimmBackbone.encode
+    real, crops = TimmBackbone.encode, []
+    frames_per_episode = tiny_frameset.frames.groupby("episode_id").size()
 
     def dying(self, images):
-        calls["n"] += 1
-        if calls["n"] > 7:  # the probe and 6 objects passed: inside the frames
-            raise KeyboardInterrupt
+        if len(images) == 2 * 2:  # a batch of 2 frames' crops (references come 3 views at a time)
+            crops.append(len(images))
+            if sum(crops) > 2 * frames_per_episode.iloc[0]:
+                raise KeyboardInterrupt
         return real(self, images)
 
     monkeypatch.setattr(TimmBackbone, "encode", dying)
+    run = RunOptions(batch_size=2, workers=1, progress=False)
     with pytest.raises(KeyboardInterrupt):
-        build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path, progress=False)
-    assert not [p for p in tmp_path.rglob("*") if p.is_file()]
+        build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path, run=run)
+    (done,) = tmp_path.rglob("chunks/*.parquet")
+    assert not list(tmp_path.rglob("features_*")) and not list(tmp_path.rglob("*.tmp"))
+    crops.clear()
+    resumed = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path, run=run)
+    assert sum(crops) == 2 * frames_per_episode.drop(done.stem).sum()  # only the episode without a chunk
+    assert resumed.crops.equals(store.crops) and resumed.meta == store.meta
+    for name in ("frames", "patch_object", "patch_cover", "refs", "ref_alpha"):
+        np.testing.assert_array_equal(getattr(resumed, name), getattr(store, name), err_msg=name)
+
+
+def test_a_split_view_opens_its_frame_sets_store_and_a_missing_store_is_named(store, tiny_frameset):
+    other = tiny_frameset.split("val")
+    assert FeatureStore.open(store.path, other).path == store.path  # a view of one frame-set: the same fingerprint
+    with pytest.raises(FeatureStoreError, match=r"no feature store at .*features_val\.parquet: run pin-match features"):
+        FeatureStore.open(store.path.with_name("features_val.parquet"))
+
+
+def _copy(store, tmp_path):
+    import shutil
+
+    root = shutil.copytree(store.path.parents[2], tmp_path / "features")
+    return root / store.path.relative_to(store.path.parents[2])
+
+
+def test_a_damaged_store_is_named_and_rebuilt_from_its_chunks(store, tiny_frameset, dino_cfg, tmp_path, monkeypatch):
+    path = _copy(store, tmp_path)
+    tokens = array_path(path, FRAME_TOKENS)
+    tokens.write_bytes(tokens.read_bytes()[:1000])  # a copy cut short
+    with pytest.raises(DamagedStoreError, match=rf"^cannot read the feature store file {tokens} .*run pin-match "
+                                                rf"features again"):
+        FeatureStore.open(path)
+    monkeypatch.setattr("pin_match.matchers.backbones.TimmBackbone.encode", lambda *a, **k: pytest.fail("backbone ran"))
+    healed = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path / "features", run=QUIET)
+    np.testing.assert_array_equal(healed.frames, store.frames)
+    path.write_bytes(b"not parquet")
+    with pytest.raises(DamagedStoreError, match=rf"^cannot read the feature store {path} \(damaged"):
+        FeatureStore.open(path)
+
+
+def test_references_of_the_wrong_shape_are_named(store, tmp_path):
+    path = _copy(store, tmp_path)
+    refs = path.parent / "refs.npy"
+    np.save(refs, np.zeros((2, 3, 16, 64), np.float16))
+    with pytest.raises(DamagedStoreError, match=rf"references {refs} \(2, 3, 16, 64\) and .* do not fit 6 objects"):
+        FeatureStore.open(path)
 
 
 def test_cli_features(tiny_frameset, dino_cfg, tmp_path, capsys):
@@ -111,7 +162,20 @@ def test_cli_features(tiny_frameset, dino_cfg, tmp_path, capsys):
     assert main(args) == 0
     line = capsys.readouterr().out
     assert line.startswith("dino@") and "4 frames (8 crops, 4x4 patches of 64 dims), 6 objects" in line
-    meta = json.loads(next(Path(tmp_path).rglob("store.json")).read_text())
-    assert meta["split"] == "val" and meta["n_crops"] == 8
+    opened = FeatureStore.open(next(Path(tmp_path).rglob("features_val.parquet")), tiny_frameset)
+    assert opened.meta["split"] == "val" and len(opened.crops) == 8 and set(opened.crops.split) == {"val"}
     assert main(["features", str(tiny_frameset.root), "--backbone", "sift", "--out", str(tmp_path)]) == 2
     assert "has no patch features" in capsys.readouterr().err
+
+
+def test_a_build_on_a_local_dask_cluster_is_the_local_store(store, tiny_frameset, dino_cfg, tmp_path):
+    pytest.importorskip("distributed")
+    args = ["features", str(tiny_frameset.root), "--backbone", "dino", "--out", str(tmp_path), "--quiet",
+            "--weights", dino_cfg["weights"], "--cfg", "model_name=test_vit", "--cfg", "img_size=64",
+            "--scheduler", "local", "--workers", "1"]
+    assert main(args) == 0
+    got = FeatureStore.open(next(tmp_path.rglob("features_all.parquet")), tiny_frameset)
+    assert got.crops.equals(store.crops) and got.meta == store.meta
+    # a network's float sums may differ in the last bits with a worker's threads (scoring.cluster)
+    np.testing.assert_allclose(got.frames.astype(np.float32), store.frames.astype(np.float32), rtol=2e-3, atol=2e-3)
+    np.testing.assert_array_equal(got.patch_object, store.patch_object)

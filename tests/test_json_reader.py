@@ -19,7 +19,6 @@ from pin_match.evaluation.sigma import SigmaError, load_threshold
 from pin_match.matchers.fitted import read_fitted_file
 from pin_match.nn.head import CONFIG_FILE, HeadError, read_head_config
 from pin_match.pin_agent.recorder import INDEX, FrameRecorder, RecordingError
-from pin_match.training.features import META, FeatureStore, FeatureStoreError
 
 DAMAGED = b'{"matcher": "sift", "sig'  # a write cut short
 
@@ -92,8 +91,6 @@ READERS = {
     "object descriptions": (_descriptions, _import, FrameSetError, "file", "objects/objects_descriptions.json"),
     "recorder's episode list": (lambda root: _damaged(root / INDEX), _recorder, RecordingError,
                                 "the recording's episode list", INDEX),
-    "feature store": (lambda root: _damaged(root / META), lambda root: FeatureStore.open(root), FeatureStoreError,
-                      "feature store metadata", META),
     "head config": (lambda root: _damaged(root / CONFIG_FILE), read_head_config, HeadError, "file", CONFIG_FILE),
     "bench thresholds": (lambda root: _damaged(BenchLayout(root).thresholds("sift")),
                          lambda root: load_threshold(BenchLayout(root).thresholds("sift"), "sift"),

@@ -182,7 +182,7 @@ def test_a_head_on_changed_backbone_weights_is_refused(head_dir, tmp_path):
 
 
 def test_cli_train_then_score(tiny_frameset, store, dino_cfg, tmp_path, capsys):
-    features = store.root.parents[2]
+    features = store.path.parents[2]
     args = ["train", str(tiny_frameset.root), "--backbone", "dino", "--weights", dino_cfg["weights"],
             "--cfg", "model_name=test_vit", "--cfg", "img_size=64", "--features", str(features),
             "--out", str(tmp_path / "head"), "--epochs", "2", "--hidden", "16", "--batch-crops", "4", "--quiet"]

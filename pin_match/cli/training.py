@@ -9,7 +9,9 @@ from pin_match.cli.args import (
     add_dataclass_flags,
     add_matcher_config,
     add_run_options,
+    add_scheduler,
     dataclass_values,
+    engine_run,
     matcher_overrides,
     run_options,
 )
@@ -18,13 +20,11 @@ from pin_match.cli.args import (
 def _cmd_features(a: argparse.Namespace) -> None:
     from pin_match.training.features import build_features
 
-    run = run_options(a)
-    store = build_features(a.frameset, a.backbone, overrides=matcher_overrides(a), out=a.out, split=a.split,
-                           batch_size=run.batch_size, progress=run.progress)
-    m = store.meta
-    print(f"{m['matcher_id']}: {m['n_frames']} frames ({m['n_crops']} crops, {m['grid']}x{m['grid']} patches of "
-          f"{m['dim']} dims), {len(m['objects'])} objects; {m['frames_per_second']:.3g} frames/s when built "
-          f"-> {store.root}")
+    with engine_run(a) as run:
+        store = build_features(a.frameset, a.backbone, overrides=matcher_overrides(a), out=a.out, split=a.split,
+                               run=run)
+    print(f"{store.backbone_id}: {store.crops.frame_id.nunique()} frames ({len(store.crops)} crops, {store.grid}x"
+          f"{store.grid} patches of {store.dim} dims), {len(store.objects)} objects -> {store.path}")
 
 
 def _cmd_train(a: argparse.Namespace) -> None:
@@ -55,14 +55,17 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
                        help="registered patch matcher whose backbone is used: effnet, dino, dinov2, clip"
                             + (" (default: effnet when installed, else dino)" if name == "train" else ""))
         add_matcher_config(s, "the backbone matcher's")
-        add_run_options(s, workers=None, batch_size=name == "features")
         if name == "features":
+            add_run_options(s, workers="threads decoding frames (default up to 2); with --scheduler local, worker "
+                                       "processes")
+            add_scheduler(s)
             s.add_argument("--out", type=Path, default=FEATURES,
-                           help=f"store root; the store goes to OUT/<backbone id>/<frame-set fingerprint>/ "
+                           help=f"store root; the store goes to OUT/features-<backbone id>/<frame-set fingerprint>/ "
                                 f"(default {FEATURES})")
             s.add_argument("--split", help="store only this split's frames (default: all)")
             s.set_defaults(func=_cmd_features)
             continue
+        add_run_options(s, workers=None, batch_size=False)
         s.add_argument("--out", type=Path, required=True, help="head folder to write, e.g. heads/NAME; a killed run "
                                                                "resumes from its last epoch")
         s.add_argument("--features", type=Path, default=FEATURES,

@@ -25,7 +25,7 @@ from pin_match import atomic, outputs
 from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.cache import Shard, assemble, cache_dir, read_meta, table_name
+from pin_match.scoring.cache import Shard, cache_dir, read_meta, table_name
 from pin_match.scoring.episode import Output
 from pin_match.scoring.local import score_here
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
@@ -105,8 +105,7 @@ def run_jobs(frameset: FrameSet | str | Path, jobs: Sequence[Job], *, split: str
     if todo:
         _run(part, list(todo.values()), episode_ids, run)
         for final, (job, output, meta) in todo.items():
-            assemble(final, [chunk_path(output.chunks, e) for e in sorted(episode_ids)], meta,
-                     job.product.schema())
+            job.product.assemble(final, [chunk_path(output.chunks, e) for e in sorted(episode_ids)], meta)
     return finals
 
 

@@ -2,7 +2,9 @@
 
 A product says how a batch of frames becomes results (``compute``), how one episode's results
 become rows (``rows``), the columns and types of its chunks and tables (``schema``), where they
-live in the cache (``folder``, ``prefix``) and the metadata a table carries (``meta``). Everything
+live in the cache (``folder``, ``prefix``), the metadata a table carries (``meta``) and how the
+chunks become the table (``assemble``: one parquet file unless the product's readers need more,
+such as ``training.features``'s memory-mapped token arrays). Everything
 else, per-episode chunks, resume after a kill, locks, Dask, the progress bar and the cache rule,
 is the engine's and the same for every product: ``pin_match.fitting.verifier``'s candidate
 signals are one, computed like any score table.
@@ -14,6 +16,7 @@ A ``Job`` is one matcher and one product; a run scores several jobs in one pass 
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -21,7 +24,7 @@ import pandas as pd
 
 from pin_match.contract.matcher import Matcher, MatcherError, notes_problem
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.cache import Shard, table_meta
+from pin_match.scoring.cache import Shard, assemble, table_meta
 from pin_match.scoring.schema import arrow_schema, episode_rows
 
 
@@ -60,6 +63,11 @@ class Product:
 
     def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
         return table_meta(matcher, fs, split, shard)
+
+    def assemble(self, final: Path, chunk_files: list[Path], meta: dict) -> None:
+        """The table at ``final`` from the episodes' chunks (sound, in canonical order), carrying ``meta``; written
+        last and atomically, so that a table that exists is whole (``cache.assemble``)."""
+        assemble(final, chunk_files, meta, self.schema())
 
 
 SCORES = Product()

@@ -64,7 +64,7 @@ def prepare_data(fs: FrameSet, store: FeatureStore, cfg: TrainConfig) -> TrainDa
     fit, held = _split_objects(fs, query_objects, cfg.holdout, cfg.seed)
     crops = store.crops[store.crops.split == "train"].reset_index(drop=True)
     if crops.empty:
-        raise TrainingError(f"feature store {store.root} holds no crop of the train split; build it for all splits "
+        raise TrainingError(f"feature store {store.path} holds no crop of the train split; build it for all splits "
                             f"or --split train")
     vis = train.visibility[train.visibility.object_id.isin(index)]
     visible = {fid: {index[o] for o in g.object_id} for fid, g in vis.groupby("frame_id")}

@@ -38,11 +38,11 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.tuning import sigma_for
 from pin_match.matchers.patch import patch_matcher
 from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
-from pin_match.scoring.cache import cache_dir
+from pin_match.scoring.options import RunOptions
 from pin_match.training.checkpoint import Trainable, TrainRun, load_state, save_state, write_head
 from pin_match.training.config import Backbone, TrainConfig, TrainingError
 from pin_match.training.data import TrainData, check_trainable, epoch_batches, prepare_data
-from pin_match.training.features import FeatureStore, build_features
+from pin_match.training.features import FeatureStore, build_features, store_path
 from pin_match.training.loss import batch_loss
 from pin_match.training.store_scores import query_frames, validation_auroc
 
@@ -63,11 +63,12 @@ def deterministic(threads: int):
 def find_store(fs: FrameSet, backbone: Backbone, features: str | Path, progress: bool) -> FeatureStore:
     """The store of this backbone config and frame-set (all splits, else the train split), built when absent."""
     matcher = patch_matcher(backbone.name, **backbone.overrides)
-    base = cache_dir(features, matcher.id, fs.fingerprint)
-    for split in ("all", "train"):
-        if (base / split / "store.json").exists():
-            return FeatureStore.open(base / split, fs)
-    return build_features(fs, backbone.name, overrides=backbone.overrides, out=features, progress=progress)
+    for split in (None, "train"):
+        path = store_path(features, matcher, fs, split)
+        if path.exists():
+            return FeatureStore.open(path, fs)
+    return build_features(fs, backbone.name, overrides=backbone.overrides, out=features,
+                          run=RunOptions(progress=progress))
 
 
 def train(frameset: FrameSet | str | Path, out: str | Path, *, backbone: Backbone | None = None,
@@ -87,7 +88,7 @@ def train(frameset: FrameSet | str | Path, out: str | Path, *, backbone: Backbon
     backbone = backbone or Backbone()
     store = features if isinstance(features, FeatureStore) else find_store(fs, backbone, features, progress)
     if store.meta["frameset_fingerprint"] != fs.fingerprint:
-        raise TrainingError(f"feature store {store.root} was built for frame-set {store.meta['frameset_root']} "
+        raise TrainingError(f"feature store {store.path} was built for frame-set {store.meta['frameset_name']!r} "
                             f"({store.meta['frameset_fingerprint']}), not for {fs.root} ({fs.fingerprint})")
     data = prepare_data(fs, store, cfg)
     store.meta["categories"] = [str(c) for c in fs.objects.set_index("object_id").category.reindex(store.objects)]
