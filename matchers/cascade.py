@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from pin_match.contract import ConfigError, MatcherConfig, MatchResult, Modality, register_matcher
+from pin_match.contract import ConfigError, Frames, MatcherConfig, MatchResult, Modality, register_matcher
 from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
 
 
@@ -75,7 +75,7 @@ class PartsCascadeMatcher(CompositeMatcher):
         self.keypoints = self.add_part("keypoints", self.cfg.keypoints, self.cfg.keypoints_cfg)
         self.require_visual()
 
-    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
-        patches = self.patch.match_batch(images)
-        keypoints = self.keypoints.match_batch(images)
+    def _match_batch(self, frames: Frames) -> list[MatchResult]:
+        patches = frames.results(self.patch)
+        keypoints = frames.results(self.keypoints)
         return [cascade_result(p, k, self.cfg.weight) for p, k in zip(patches, keypoints)]

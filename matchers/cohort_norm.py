@@ -12,12 +12,15 @@ look-alikes in the house score like its closest cohort members; where the cohort
 like them (another domain, other categories), the scale is a generic one (docs/instance-matchers.md).
 Each target's cohort (every member's score, the scale) goes into the score table as its notes,
 so the report shows it beside the target's scores. Cost: a base pass per cohort image at every
-``prepare``, nothing more a frame.
+``prepare`` (one for every variant prepared with the same base, target and cohort), nothing more a
+frame: the base's results on a batch of frames are the batch's (``contract.frames``), so variants
+scored together, and the base scored beside them, run it once.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import threading
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -28,6 +31,7 @@ import numpy as np
 
 from pin_match.contract import (
     ConfigError,
+    Frames,
     MatcherConfig,
     MatcherError,
     MatchResult,
@@ -43,6 +47,9 @@ from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 COHORT_BATCH = 8
+KEPT_COHORTS = 16  # cohort scores kept (a base and a target each): a run prepares its variants of a target in turn
+_COHORT_SCORES: dict[tuple, tuple[float, ...]] = {}
+_COHORT_LOCK = threading.Lock()
 
 
 @dataclass
@@ -91,15 +98,19 @@ class CohortNormMatcher(CompositeMatcher):
         return Path(self.cfg.weights).expanduser() if self.cfg.weights else self.weights_spec.carried_file()
 
     @property
-    def cohort_images(self) -> dict[str, np.ndarray]:
-        """The cohort's images by file name, RGB: read once per process and folder state, so every variant of
-        this matcher scores the same buffers and a run's shared pass scores them once (``contract.shared``)."""
+    def cohort_files(self) -> tuple[tuple[str, int, int], ...]:
+        """The cohort's images as (path, modification time, size): what its images and scores are read again on."""
         folder = self.cohort_folder
         files = sorted(p for p in folder.iterdir() if p.suffix.lower() in IMAGE_SUFFIXES) if folder.is_dir() else []
         if not files:
             raise WeightsError(f"matcher {self.display_name}: the cohort folder {folder} holds no images "
                                f"({', '.join(IMAGE_SUFFIXES)})")
-        return _read_cohort(tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files))
+        return tuple((str(p), p.stat().st_mtime_ns, p.stat().st_size) for p in files)
+
+    @property
+    def cohort_images(self) -> dict[str, np.ndarray]:
+        """The cohort's images by file name, RGB: read once per process and folder state."""
+        return _read_cohort(self.cohort_files)
 
     @property
     def score_scale(self) -> str:
@@ -110,13 +121,28 @@ class CohortNormMatcher(CompositeMatcher):
 
     def _prepare(self, target: Target) -> None:
         super()._prepare(target)
-        cohort = self.cohort_images  # the folder listed once
-        names, images = list(cohort), list(cohort.values())
-        scores = [r.score for i in range(0, len(images), COHORT_BATCH)
-                  for r in self.base.match_batch(images[i:i + COHORT_BATCH])]
+        files = self.cohort_files  # the folder listed once
+        names = [Path(path).name for path, _, _ in files]
         cfg = self.cfg
-        self._cohort = TargetCohort.of(str(self.cohort_folder), names, scores, k=cfg.k, min_std=cfg.min_std,
-                                       probability=cfg.probability)
+        self._cohort = TargetCohort.of(str(self.cohort_folder), names, self._cohort_scores(files), k=cfg.k,
+                                       min_std=cfg.min_std, probability=cfg.probability)
+
+    def _cohort_scores(self, files: tuple[tuple[str, int, int], ...]) -> tuple[float, ...]:
+        """The base's score of each cohort image for the prepared target. Kept by the base's ``share_key`` (id,
+        device, target) and the folder's state, the last ``KEPT_COHORTS`` of a process, so the variants of this
+        matcher (other ``k``, ``min_std``, ``probability``) that a run prepares alike score the cohort once."""
+        key = (self.base.share_key, files)
+        with _COHORT_LOCK:  # a Dask worker prepares in several threads
+            found = _COHORT_SCORES.get(key)
+        if found is None:
+            images = list(_read_cohort(files).values())
+            found = tuple(r.score for i in range(0, len(images), COHORT_BATCH)
+                          for r in self.base.match_batch(images[i:i + COHORT_BATCH]))
+            with _COHORT_LOCK:
+                _COHORT_SCORES[key] = found
+                while len(_COHORT_SCORES) > KEPT_COHORTS:
+                    del _COHORT_SCORES[next(iter(_COHORT_SCORES))]
+        return found
 
     @property
     def cohort(self) -> TargetCohort:
@@ -128,10 +154,10 @@ class CohortNormMatcher(CompositeMatcher):
     def target_notes(self) -> dict[str, Any]:
         return self.cohort.as_notes()
 
-    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+    def _match_batch(self, frames: Frames) -> list[MatchResult]:
         norm = self.cohort.impostors.normalised
         out = []
-        for r in self.base.match_batch(images):
+        for r in frames.results(self.base):
             out.append(dataclasses.replace(
                 r, score=float(norm(r.score)), point_scores=_mapped(norm, r.scores_of_points()),
                 crop_scores=_mapped(norm, r.crop_scores), box_scores=_mapped(norm, r.box_scores)))

@@ -32,7 +32,10 @@ def part_cfg_field(role: str) -> Any:
 
 
 class CompositeMatcher(Matcher):
-    """A matcher built from registered matchers; ``add_part`` in the constructor, ``_match_batch`` to combine."""
+    """A matcher built from registered matchers; ``add_part`` in the constructor, ``_match_batch`` to combine.
+
+    ``_match_batch`` receives the batch as ``Frames``: a part run on those frames is asked of it
+    (``frames.results(part)``), so it runs once however many matchers of a run use it."""
 
     def __init__(self, cfg: MatcherConfig | None = None) -> None:
         super().__init__(cfg)

@@ -24,9 +24,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from pin_match.contract import (
+    Frames,
     Matcher,
     MatcherConfig,
     MatchResult,
@@ -101,11 +100,11 @@ class FusionMatcher(CompositeMatcher):
     def weights_hint(self, role: str) -> str:
         return f"its config in the fusion file {self.path}"
 
-    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
-        per_part = [part.match_batch(images) for part in self.components]
+    def _match_batch(self, frames: Frames) -> list[MatchResult]:
+        per_part = [frames.results(part) for part in self.components]
         anchor = int(self.spec["points_from"])
         out = []
-        for k in range(len(images)):
+        for k in range(len(frames)):
             results = [r[k] for r in per_part]
             score = fused_score(self.spec, [r.score for r in results])
             shown = results[anchor]

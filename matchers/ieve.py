@@ -9,6 +9,7 @@ from typing import Any
 import numpy as np
 
 from pin_match.contract import (
+    Frames,
     MatcherConfig,
     MatcherError,
     MatchResult,
@@ -81,8 +82,8 @@ class IeveMatcher(CompositeMatcher):
         self.gate = self.add_part("gate", self.cfg.gate, self.cfg.gate_cfg, category_query(self.cfg.gate))
         self.keypoints = self.add_part("keypoints", self.cfg.keypoints, self.cfg.keypoints_cfg)
 
-    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
-        gates = self.gate.match_batch(images)
-        keypoints = self.keypoints.match_batch(images)
+    def _match_batch(self, frames: Frames) -> list[MatchResult]:
+        gates = frames.results(self.gate)
+        keypoints = frames.results(self.keypoints)
         return [gated_count(k.points, g.boxes, g.box_scores, self.cfg.gate_sigma, self.cfg.gate)
                 for g, k in zip(gates, keypoints)]

@@ -55,6 +55,7 @@ import torch.nn.functional as F
 
 from pin_match.contract import (
     ConfigError,
+    Frames,
     MatcherConfig,
     MatcherError,
     MatchResult,
@@ -283,12 +284,13 @@ class VerifyMatcher(CompositeMatcher):
 
     # ------------------------------------------------------------------ signals
     @torch.inference_mode()
-    def candidate_signals(self, images: list[np.ndarray]) -> list[list[tuple[Candidate, dict[str, float]]]]:
-        """Per image, its candidates with their signals: what the verifier file weighs, and what it is fitted on."""
+    def candidate_signals(self, frames: Frames) -> list[list[tuple[Candidate, dict[str, float]]]]:
+        """Per frame, its candidates with their signals: what the verifier file weighs, and what it is fitted on.
+        The locate map is the batch's (``frames.results``): computed once however many matchers ask for it."""
         cfg, ref = self.cfg, self.reference
-        located = self.locator.match_batch(images)
+        located = frames.results(self.locator)
         per_image, crops = [], []
-        for image, result in zip(images, located):
+        for image, result in zip(frames, located):
             plan = crop_boxes(image.shape[0], image.shape[1], self.locator.cfg.crops)
             found = locate(result.heatmap, plan, image.shape[:2], count=cfg.candidates, drop=cfg.region_drop,
                            aspect=ref.aspect, pad=cfg.pad)
@@ -328,10 +330,10 @@ class VerifyMatcher(CompositeMatcher):
         return {"desc": desc, "cycle": cycle, "color": color}
 
     # ------------------------------------------------------------------ decision
-    def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:
+    def _match_batch(self, frames: Frames) -> list[MatchResult]:
         spec = self.decision
         results = []
-        for rows in self.candidate_signals(images):
+        for rows in self.candidate_signals(frames):
             scores = np.array([verdict(spec, signals) for _, signals in rows], np.float32)
             cands = [c for c, _ in rows]
             results.append(MatchResult(

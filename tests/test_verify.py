@@ -11,7 +11,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from pin_match.contract import ConfigError, Crop, WeightsError, check_matcher, create_matcher
+from pin_match.contract import ConfigError, Crop, Frames, WeightsError, check_matcher, create_matcher
 from pin_match.evaluation.labels import frame_labels
 from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import (
@@ -332,7 +332,7 @@ def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
     effnet = create_matcher("effnet")
     effnet.prepare(tiny_frameset.target(episode.target_object_id))
     image = tiny_frameset.image(tiny_frameset.frames.frame_id.iloc[0])
-    (rows,) = matcher.candidate_signals([image])
+    (rows,) = matcher.candidate_signals(Frames([image]))
     assert zoom_passes == [] and rows[0][1]["proto"] == pytest.approx(effnet.match(image).score, abs=1e-6)
 
 

@@ -6,6 +6,7 @@ from here.
 """
 
 from pin_match.contract.crops import POLICIES, Crop, crop_boxes
+from pin_match.contract.frames import Frames
 from pin_match.contract.matcher import (
     N_DESCRIPTIONS,
     N_VIEWS,
@@ -21,7 +22,6 @@ from pin_match.contract.matcher import (
     TargetError,
     crops_field,
     merge_crop_results,
-    points_above,
     weights_field,
 )
 from pin_match.contract.preset import Preset
@@ -38,6 +38,7 @@ from pin_match.contract.registry import (
     register_matcher,
     with_weights,
 )
+from pin_match.contract.results import points_above
 from pin_match.contract.testing import ContractError, check_matcher
 from pin_match.contract.weights import (
     WeightsError,
@@ -52,8 +53,8 @@ from pin_match.errors import PinMatchError
 
 __all__ = [
     "ENTRY_POINT_GROUP", "N_DESCRIPTIONS", "N_VIEWS", "POLICIES", "ConfigError", "ContractError", "Crop", "CropConfig",
-    "CropMatcher", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError", "Preset",
-    "RegistrationError", "Target", "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec",
+    "CropMatcher", "Frames", "MatchResult", "Matcher", "MatcherConfig", "MatcherError", "Modality", "PinMatchError",
+    "Preset", "RegistrationError", "Target", "TargetError", "UnknownMatcherError", "WeightsError", "WeightsSpec",
     "available_names", "build_config", "check_matcher", "content_digest", "create_matcher", "crop_boxes", "crops_field",
     "get_matcher_class", "list_matchers", "load_torch_state", "merge_crop_results", "misfit", "parse_overrides",
     "points_above", "read_state_dict", "register_matcher", "resolve_all", "weights_field", "with_weights",

@@ -1,6 +1,6 @@
-"""The matcher contract: the target, the result, the base classes, the config.
+"""The matcher contract: the target, the base classes, the config (the result is ``contract.results``'s).
 
-It imports numpy and the rest of ``pin_match.contract`` (crops, weights) only; nothing of
+It imports numpy and the rest of ``pin_match.contract`` (crops, frames, results, weights) only; nothing of
 frame-sets, scoring or metrics. A plug-in imports everything it needs from
 ``pin_match.contract``.
 
@@ -22,12 +22,14 @@ from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from enum import Enum
+from functools import cached_property
 from typing import Any, ClassVar, Protocol
 
 import numpy as np
 
-from pin_match.contract import shared
 from pin_match.contract.crops import POLICIES, Crop, crop_boxes
+from pin_match.contract.frames import Frames
+from pin_match.contract.results import MatchResult, extras_problem, points_problem
 from pin_match.contract.weights import WeightsSpec
 from pin_match.errors import PinMatchError
 
@@ -71,6 +73,16 @@ class Target:
             raise TargetError(
                 f"target {self.object_id}: expected {N_DESCRIPTIONS} descriptions, got {len(self.descriptions)}"
             )
+
+    @cached_property
+    def fingerprint(self) -> str:
+        """A digest of what a matcher is told (name, label, descriptions, views' pixels): two targets of one name
+        from two frame-sets differ in it, so no batch lends one's results to the other (``Matcher.share_key``)."""
+        h = hashlib.sha256(json.dumps([self.object_id, self.category, list(self.descriptions)]).encode())
+        for view in self.views:
+            h.update(str(view.shape).encode())
+            h.update(np.ascontiguousarray(view).data)
+        return h.hexdigest()[:16]
 
 
 class MatcherError(PinMatchError, RuntimeError):
@@ -122,44 +134,6 @@ class CropConfig(MatcherConfig):
     crops: str = crops_field()
 
 
-def _point_array(a: Any) -> np.ndarray:
-    return np.asarray(a, dtype=np.float32).reshape(-1, 2) if a is not None else np.zeros((0, 2), np.float32)
-
-
-@dataclass
-class MatchResult:
-    """One image's verdict; ``points_at(sigma)`` recovers the coordinates for any threshold."""
-
-    score: float
-    points: np.ndarray = field(default_factory=lambda: np.zeros((0, 2), np.float32))  # (K, 2) x, y
-    point_scores: np.ndarray | None = None   # (K,); None = every point carries the frame score
-    crop_scores: np.ndarray | None = None    # one score per crop of the crop policy
-    heatmap: np.ndarray | None = None        # low-resolution score map (per crop: n_crops x h x w)
-    boxes: np.ndarray | None = None          # (M, 4) x0, y0, x1, y1 in image pixels
-    box_scores: np.ndarray | None = None     # (M,)
-
-    def __post_init__(self) -> None:
-        self.points = _point_array(self.points)
-        if self.point_scores is not None:
-            self.point_scores = np.asarray(self.point_scores, dtype=np.float32).reshape(-1)
-
-    def scores_of_points(self) -> np.ndarray:
-        if self.point_scores is None:
-            return np.full(len(self.points), self.score, np.float32)
-        return self.point_scores
-
-    def points_at(self, sigma: float) -> np.ndarray:
-        """The target's coordinates under threshold sigma (empty when the frame is not matched)."""
-        return points_above(self.score, self.points, self.scores_of_points(), sigma)
-
-
-def points_above(score: float, points: np.ndarray, point_scores: np.ndarray, sigma: float) -> np.ndarray:
-    """The caller's threshold rule: no points unless the frame is matched, then the points scoring >= sigma."""
-    if score < sigma:
-        return np.zeros((0, 2), np.float32)
-    return points[point_scores >= sigma]
-
-
 class PresetLike(Protocol):
     """What ``class Name(Base, preset=...)`` takes: a ``Preset`` (``pin_match.contract.preset``)."""
 
@@ -168,6 +142,9 @@ class PresetLike(Protocol):
 
 class Matcher(ABC):
     """Base class: subclasses implement ``_prepare`` and ``_match_batch``.
+
+    ``_match_batch`` receives a batch of RGB uint8 frames as a list of its own; the list is a
+    ``Frames``, which a matcher built from others asks for their results (``contract.frames``).
 
     Class attributes describe the method for the registry, ``pin-match list`` and the docs.
     Bump ``version`` whenever the algorithm changes results, so stale caches are not reused.
@@ -195,6 +172,7 @@ class Matcher(ABC):
             raise ConfigError(f"{self.display_name}: config must be {self.Config.__name__}, got "
                               f"{type(self.cfg).__name__}")
         self._target: Target | None = None
+        self._hash: tuple[str, str] | None = None  # (what it was computed from, the hash)
 
     # ------------------------------------------------------------------ identity
     @property
@@ -203,15 +181,24 @@ class Matcher(ABC):
 
     @property
     def config_hash(self) -> str:
-        """Hash of name, version, config and the weights' identity (content for local files), never of a path."""
-        config = self.cfg.hashed_dict()
-        weights = config.pop("weights", None)
-        payload = dict(matcher=self.display_name, version=self.version, config=config)
-        if self.weights_spec is not None:
-            payload["weights"] = self.weights_spec.identity(weights)
-        if self.parts():  # a new version of a part never reuses the composite's caches
-            payload["parts"] = {role: part.id for role, part in self.parts().items()}
-        return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
+        """Hash of name, version, config and the weights' identity (content for local files), never of a path.
+
+        Computed once (a ``weights`` folder is walked and read to hash it): again only when the
+        config, the version, the weights' source or a part's id has changed since.
+        """
+        parts = {role: part.id for role, part in self.parts().items()}
+        state = repr((self.display_name, self.version, self.cfg, self.weights_spec, parts))
+        if self._hash is None or self._hash[0] != state:
+            config = self.cfg.hashed_dict()
+            weights = config.pop("weights", None)
+            payload = dict(matcher=self.display_name, version=self.version, config=config)
+            if self.weights_spec is not None:
+                payload["weights"] = self.weights_spec.identity(weights)
+            if parts:  # a new version of a part never reuses the composite's caches
+                payload["parts"] = parts
+            self._hash = (state, hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode())
+                          .hexdigest()[:12])
+        return self._hash[1]
 
     @property
     def id(self) -> str:
@@ -230,21 +217,31 @@ class Matcher(ABC):
         return self.match_batch([image])[0]
 
     def match_batch(self, images: Sequence[np.ndarray]) -> list[MatchResult]:
+        """The results on ``images`` (RGB, RGBA or grey, uint8); parts run once on them (``contract.frames``)."""
+        return self.match_frames(Frames(images))
+
+    def match_frames(self, frames: Frames) -> list[MatchResult]:
+        """The results on a batch that other matchers may share: computed here, the parts' results borrowed from
+        ``frames``. ``frames.results(matcher)`` computes them once for all who ask."""
         if self._target is None:
             raise MatcherError(f"matcher {self.display_name}: call prepare(target) before match()")
-        images = [self._check_image(im, i) for i, im in enumerate(images)]
-        key = shared.batch_key(self.id, self._target.object_id, images) if shared.active() else None
-        if key is not None and (found := shared.recall(key)) is not None:
-            return found
-        results = self._match_batch(images)
-        if len(results) != len(images):
+        for i, image in enumerate(frames):
+            self._check_image(image, i)
+        results = self._match_batch(frames.for_one())
+        if len(results) != len(frames):
             raise MatcherError(f"matcher {self.display_name} returned {len(results)} results for "
-                               f"{len(images)} images")
-        for image, result in zip(images, results):
+                               f"{len(frames)} images")
+        for image, result in zip(frames, results):
             self._validate(result, image.shape[0], image.shape[1])
-        if key is not None:
-            shared.remember(key, images, results)
         return results
+
+    @property
+    def share_key(self) -> tuple[str, str, str]:
+        """What a batch lends this matcher's results under (``Frames.results``): its id, its device (a network's
+        last bits differ between devices) and the target it is prepared for (its content, not only its name)."""
+        if self._target is None:
+            raise MatcherError(f"matcher {self.display_name}: call prepare(target) before match()")
+        return (self.id, self.cfg.device, self._target.fingerprint)
 
     def parts(self) -> dict[str, Matcher]:
         """The matchers a composite is built from, by role (their weights are listed by ``pin-match list``)."""
@@ -277,16 +274,12 @@ class Matcher(ABC):
     def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]: ...
 
     # ------------------------------------------------------------------ checks
-    def _check_image(self, image: np.ndarray, index: int) -> np.ndarray:
-        image = np.asarray(image)
-        if image.ndim == 2:  # grayscale frames are accepted and expanded
-            image = np.repeat(image[:, :, None], 3, axis=2)
-        if image.ndim != 3 or image.shape[2] not in (3, 4) or image.dtype != np.uint8:
+    def _check_image(self, image: np.ndarray, index: int) -> None:
+        if image.ndim != 3 or image.shape[2] != 3 or image.dtype != np.uint8:
             raise MatcherError(f"matcher {self.display_name}: image {index} must be H x W x 3 uint8, got "
                                f"{image.shape} {image.dtype}")
         if image.shape[0] < 8 or image.shape[1] < 8:
             raise MatcherError(f"matcher {self.display_name}: image {index} is too small ({image.shape[:2]})")
-        return np.ascontiguousarray(image[:, :, :3])
 
     def _validate(self, r: MatchResult, height: int, width: int) -> None:
         who = f"matcher {self.display_name}"
@@ -295,43 +288,11 @@ class Matcher(ABC):
         if not isinstance(r.score, (float, int, np.floating, np.integer)) or not math.isfinite(float(r.score)):
             raise MatcherError(f"{who} returned a non-finite score {r.score!r}")
         r.score = float(r.score)
-        problem = _points_problem(r, height, width) or _extras_problem(r)
+        problem = points_problem(r, height, width) or extras_problem(r)
         if problem:
             raise MatcherError(f"{who} {problem}")
         if r.boxes is not None:
             r.boxes = np.asarray(r.boxes, np.float32).reshape(-1, 4)
-
-
-def notes_problem(notes: object) -> str | None:
-    """Why a matcher's ``target_notes()`` cannot be stored with a score table (JSON text), or None."""
-    if not isinstance(notes, dict):
-        return f"target_notes() returned {type(notes).__name__}, expected a dict"
-    try:
-        json.dumps(notes, allow_nan=False)
-    except (TypeError, ValueError) as exc:
-        return f"target_notes() must hold JSON values (text, finite numbers, lists, dicts): {exc}"
-    return None
-
-
-def _points_problem(r: MatchResult, height: int, width: int) -> str | None:
-    if not np.isfinite(r.points).all():
-        return "returned non-finite points"
-    x, y = r.points[:, 0], r.points[:, 1]
-    if len(r.points) and ((x < 0).any() or (y < 0).any() or (x >= width).any() or (y >= height).any()):
-        return f"returned points outside the {width}x{height} image"
-    if r.point_scores is not None and r.point_scores.shape != (len(r.points),):
-        return f"returned {len(r.point_scores)} point scores for {len(r.points)} points"
-    if r.point_scores is not None and not np.isfinite(r.point_scores).all():
-        return "returned non-finite point scores"
-    return None
-
-
-def _extras_problem(r: MatchResult) -> str | None:
-    if r.crop_scores is not None and not np.isfinite(r.crop_scores).all():
-        return "returned non-finite crop scores"
-    if r.boxes is not None and (r.box_scores is None or len(r.box_scores) != len(np.asarray(r.boxes).reshape(-1, 4))):
-        return "returned boxes without one box score each"
-    return None
 
 
 def class_problems(cls: type[Matcher]) -> list[str]:

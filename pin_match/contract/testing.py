@@ -24,9 +24,9 @@ from pin_match.contract.matcher import (
     Modality,
     Target,
     class_problems,
-    notes_problem,
 )
 from pin_match.contract.registry import build_config, get_matcher_class
+from pin_match.contract.results import notes_problem
 from pin_match.errors import PinMatchError
 
 FRAME_SHAPES: dict[str, tuple[int, ...]] = {

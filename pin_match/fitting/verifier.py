@@ -27,6 +27,7 @@ import pyarrow as pa
 
 import pin_match
 from pin_match import atomic, outputs
+from pin_match.contract.frames import Frames
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.carry import pooled
@@ -87,11 +88,8 @@ class CandidateSignals(Product):
         payload = json.dumps([matcher.signals_id, list(self.signals)])
         return f"verify-signals@{hashlib.sha256(payload.encode()).hexdigest()[:12]}"
 
-    def compute(self, matcher: VerifyMatcher, images: list[np.ndarray]) -> list[Any]:
-        return matcher.candidate_signals(images)
-
-    def frames_in_parallel(self, matcher: VerifyMatcher) -> bool:
-        return False
+    def compute(self, matcher: VerifyMatcher, frames: Frames) -> list[Any]:
+        return matcher.candidate_signals(frames)
 
     def rows(self, fs: FrameSet, episode: Any, frame_ids: list[str], steps: np.ndarray,
              results: list[Any]) -> pd.DataFrame:

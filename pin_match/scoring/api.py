@@ -80,8 +80,8 @@ def run_jobs(frameset: FrameSet | str | Path, jobs: Sequence[Job], *, split: str
     """Every job's table of ``split`` (found in the cache, or computed in one pass over the frames); their paths.
 
     The jobs without a current table are run together: each frame is decoded once and handed to
-    each of them, and a part several matchers share runs once (``contract.shared``), so ``verify``
-    and ``effnet`` together cost little more than ``verify``. Each job's table lives at
+    each of them in one batch, which computes a matcher several ask for once (``contract.frames``),
+    so ``verify`` and ``effnet`` together cost little more than ``verify``. Each job's table lives at
     ``cache_dir(out, product.folder(matcher), fingerprint)`` and is the same bytes as the job
     run alone. Two jobs of one matcher and product are one job.
     """

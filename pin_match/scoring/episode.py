@@ -1,10 +1,11 @@
 """One episode into its chunks: the per-episode step that the local runner and the Dask runner share.
 
 A run scores one or more jobs (a matcher and its product, ``product.Job``) in one pass: each
-frame is decoded once, in a thread pool ahead of the matchers, and handed to every job, and a
-part that several matchers share (``verify``'s locate map is ``effnet``'s) runs once per batch
-(``contract.shared``). Each job's rows land in its own chunk file; an episode whose chunks all
-exist is not scored again, and one that lacks some is scored for those jobs only.
+frame is decoded once, in a thread pool ahead of the matchers, made RGB once, and handed to
+every job as one batch (``contract.frames.Frames``), which computes a matcher that several ask
+for (``verify``'s locate map is ``effnet``'s scores) once and lends each its own copy. Each job's
+rows land in its own chunk file; an episode whose chunks all exist is not scored again, and one
+that lacks some is scored for those jobs only.
 """
 
 from __future__ import annotations
@@ -15,11 +16,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 import pandas as pd
 
+from pin_match.contract.frames import Frames
 from pin_match.contract.matcher import Matcher, MatcherError
-from pin_match.contract.shared import shared_pass
 from pin_match.data.frameset import FrameSet
 from pin_match.scoring.product import Product
 from pin_match.scoring.schema import chunk_rows, write_chunk
@@ -53,17 +53,15 @@ class PreparedMatchers:
         self.pool = ThreadPoolExecutor(max_workers=max(2, workers))
 
     def hold(self, fs: FrameSet, target_id: str, which: Sequence[int]) -> None:
-        """Prepare the matchers ``which`` for the target; in one shared pass, so what several compute alike while
-        preparing (variants of ``cohort-norm`` scoring one cohort with one base) is computed once."""
+        """Prepare the matchers ``which`` for the target (each of them once, however many episodes of it follow)."""
         todo = [i for i in which if self.targets[i] != target_id]
         if not todo:
             return
         target = fs.target(target_id)
-        with shared_pass():
-            for i in todo:
-                self.targets[i] = None  # a failed prepare leaves nothing held
-                self.matchers[i].prepare(target)
-                self.targets[i] = target_id
+        for i in todo:
+            self.targets[i] = None  # a failed prepare leaves nothing held
+            self.matchers[i].prepare(target)
+            self.targets[i] = target_id
 
     def forget(self) -> None:
         """After a failed episode: a matcher may be half-prepared, so the next episode prepares again."""
@@ -112,26 +110,17 @@ def score_episode(fs: FrameSet, prepared: PreparedMatchers, products: Sequence[P
     # decoding runs ahead of matching in the pool, so it overlaps inference
     decoded = [pool.submit(lambda b=b: [fs.image(f) for f in b]) for b in batches[:2]]
     for k in range(len(batches)):
-        images = decoded[k].result()
+        # one batch for every job: a part several ask for runs once on it
+        batch = Frames(decoded[k].result(), pool=pool, workers=prepared.workers)
         if k + 2 < len(batches):
             decoded.append(pool.submit(lambda b=batches[k + 2]: [fs.image(f) for f in b]))
-        with shared_pass():  # a part several matchers share runs once on this batch
-            for out, i, product in zip(results, which, products):
-                try:
-                    out.extend(_compute(prepared, i, product, images))
-                except MatcherError as exc:
-                    raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") \
-                        from exc
+        for out, i, product in zip(results, which, products):
+            try:
+                out.extend(product.compute(prepared.matchers[i], batch))
+            except MatcherError as exc:
+                raise MatcherError(f"{exc} (episode {episode_id!r}, frames {batches[k][0]}..{batches[k][-1]})") \
+                    from exc
         if bar is not None:
-            bar.update(len(images))
+            bar.update(len(batch))
     steps = frames.step.to_numpy()
     return [product.rows(fs, ep, ids, steps, out) for out, product in zip(results, products)]
-
-
-def _compute(prepared: PreparedMatchers, i: int, product: Product, images: list[np.ndarray]) -> list[Any]:
-    matcher, workers = prepared.matchers[i], prepared.workers
-    if not (product.frames_in_parallel(matcher) and workers > 1):
-        return product.compute(matcher, images)
-    parts = np.array_split(np.arange(len(images)), min(workers, len(images)))
-    futures = [prepared.pool.submit(product.compute, matcher, [images[j] for j in p]) for p in parts if len(p)]
-    return [r for f in futures for r in f.result()]

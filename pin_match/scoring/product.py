@@ -10,7 +10,7 @@ is the engine's and the same for every product: ``pin_match.fitting.verifier``'s
 signals are one, computed like any score table.
 
 A ``Job`` is one matcher and one product; a run scores several jobs in one pass over the frames
-(each frame decoded once, a part shared by several matchers run once: ``contract.shared``).
+(each frame decoded once, a matcher several ask for computed once on each batch: ``contract.frames``).
 """
 
 from __future__ import annotations
@@ -22,7 +22,9 @@ from typing import Any, ClassVar
 import numpy as np
 import pandas as pd
 
-from pin_match.contract.matcher import Matcher, MatcherError, notes_problem
+from pin_match.contract.frames import Frames
+from pin_match.contract.matcher import Matcher, MatcherError
+from pin_match.contract.results import notes_problem
 from pin_match.data.frameset import FrameSet
 from pin_match.scoring.cache import Shard, assemble, table_meta
 from pin_match.scoring.schema import arrow_schema, episode_rows
@@ -38,12 +40,10 @@ class Product:
         """The cache folder's name for this matcher (``cache.cache_dir``'s middle part)."""
         return matcher.id
 
-    def compute(self, matcher: Matcher, images: list[np.ndarray]) -> list[Any]:
-        return matcher.match_batch(images)
-
-    def frames_in_parallel(self, matcher: Matcher) -> bool:
-        """Whether ``compute`` may run on parts of a batch in several threads at once."""
-        return matcher.parallel_frames
+    def compute(self, matcher: Matcher, frames: Frames) -> list[Any]:
+        """The matcher's results on one batch, its own copy of them (the batch computes them once for every job
+        and part that asks)."""
+        return frames.results(matcher)
 
     def rows(self, fs: FrameSet, episode: Any, frame_ids: list[str], steps: np.ndarray,
              results: list[Any]) -> pd.DataFrame:

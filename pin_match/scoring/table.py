@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic
-from pin_match.contract.matcher import points_above
+from pin_match.contract.results import points_above
 from pin_match.errors import PinMatchError
 from pin_match.scoring.schema import COLUMNS, TARGETS, decode_meta, encode_meta
 
