@@ -21,6 +21,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from pin_match.nn.fold import fold_batch_norms
+
 # checkpoint names looked for, in order, when ``weights=`` names a folder (what the libraries save)
 TIMM_FILES = ("model.safetensors", "pytorch_model.bin", "model.pth")
 OPEN_CLIP_FILES = ("open_clip_model.safetensors", "open_clip_pytorch_model.bin", "model.safetensors",
@@ -228,13 +230,15 @@ class FeatureMapBackbone:
     stages only. The global vector is the feature map's mean over cells (the network's own
     pooling, before its classifier), which ``embed_reference`` uses. Weights and inputs are
     channels-last: CPU convolutions run faster in that layout, with features equal up to rounding
-    (docs/performance.md). Its activations stay on the heap (``keep_large_blocks_on_the_heap``).
+    (docs/performance.md). Its activations stay on the heap (``keep_large_blocks_on_the_heap``), and its batch norms
+    are folded into the convolutions before them (``pin_match.nn.fold``): it only ever runs in eval mode.
     """
 
     def __init__(self, trunk: torch.nn.Sequential, normalisation: tuple[Sequence[float], Sequence[float], str],
                  img_size: int, layer: str, device: str = "cpu") -> None:
         keep_large_blocks_on_the_heap()
         self.trunk = trunk.eval()
+        fold_batch_norms(self.trunk, torch.zeros(1, 3, 64, 64))
         with torch.inference_mode():  # the layer's stride, measured: the libraries list only some reductions
             stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]
         if img_size % stride:
