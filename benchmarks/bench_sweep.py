@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.timing import fastest, once
-from pin_match.evaluation.metrics import frame_arrays
-from pin_match.evaluation.sweep import sweep, sweep_loop
+from pin_match.evaluation.core.metrics import frame_arrays
+from pin_match.evaluation.core.sweep import sweep, sweep_loop
 
 
 def synthetic_scored(n_frames: int, n_episodes: int, seed: int = 0) -> pd.DataFrame:

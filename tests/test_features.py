@@ -13,7 +13,7 @@ from pin_match.cli import main
 from pin_match.contract import ConfigError
 from pin_match.contract.crops import crop_boxes
 from pin_match.data.writer import FrameSetWriter
-from pin_match.matchers.patch import alpha_to_grid, patch_matcher
+from pin_match.matchers.common.patch import alpha_to_grid, patch_matcher
 from pin_match.training.features import FeatureStore, FeatureStoreError, build_features, patch_coverage
 
 
@@ -65,7 +65,8 @@ def test_coverage_of_a_crop_not_divisible_by_the_grid():
 def test_the_store_is_reused_not_rebuilt(store, tiny_frameset, dino_cfg, monkeypatch):
     out = store.root.parents[2]
     stamp = os.stat(store.root / "frames.npy").st_mtime_ns
-    monkeypatch.setattr("pin_match.matchers.backbones.TimmBackbone.encode", lambda *a, **k: pytest.fail("backbone ran"))
+    monkeypatch.setattr("pin_match.matchers.common.backbones.TimmBackbone.encode",
+                        lambda *a, **k: pytest.fail("backbone ran"))
     again = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=out, progress=False)
     assert again.root == store.root and os.stat(again.root / "frames.npy").st_mtime_ns == stamp
 
@@ -88,7 +89,7 @@ def test_a_matcher_without_patch_features_is_refused(tiny_frameset, tmp_path):
 
 
 def test_a_failed_build_leaves_nothing(tiny_frameset, dino_cfg, tmp_path, monkeypatch):
-    from pin_match.matchers.backbones import TimmBackbone
+    from pin_match.matchers.common.backbones import TimmBackbone
 
     calls = {"n": 0}
     real = TimmBackbone.encode

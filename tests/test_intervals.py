@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from test_metrics import hand_scored
 
-from pin_match.evaluation.intervals import (
+from pin_match.evaluation.core.intervals import (
     bootstrap_ci,
     episode_weights,
     instance_clusters,
     percentile_interval,
     unit_codes,
 )
-from pin_match.evaluation.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.core.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
 
 
 def test_bootstrap_is_seeded_and_honours_undefined():

@@ -8,7 +8,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.metrics import (
+from pin_match.evaluation.core.metrics import (
     MetricsError,
     auroc,
     average_precision,

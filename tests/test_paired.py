@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import EvalContext
-from pin_match.evaluation.intervals import weighted_auroc
-from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics
-from pin_match.evaluation.paired import (
+from pin_match.evaluation.core.intervals import weighted_auroc
+from pin_match.evaluation.core.metrics import Bootstrap, auroc, detection_metrics
+from pin_match.evaluation.core.paired import (
     PairedError,
     disagreements,
     first_match_outcomes,
@@ -109,8 +109,8 @@ def test_different_frames_are_refused():
 def test_compare_writes_the_folder(tiny_frameset, tmp_path):
     from test_report_page import make_table
 
-    from pin_match.evaluation.compare import AtSigma, compare
-    from pin_match.evaluation.sigma import SigmaChoice
+    from pin_match.evaluation.core.sigma import SigmaChoice
+    from pin_match.evaluation.flows.compare import AtSigma, compare
     from pin_match.scoring.table import ScoreTable
 
     a = make_table(tiny_frameset)

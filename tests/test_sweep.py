@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.metrics import COUNT_KEYS, METRIC_KEYS, detection_metrics
-from pin_match.evaluation.sweep import sweep, sweep_loop
+from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, detection_metrics
+from pin_match.evaluation.core.sweep import sweep, sweep_loop
 
 
 def random_scored(seed: int, n: int = 500, episodes: int = 40, levels: int | None = None,

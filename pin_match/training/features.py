@@ -33,7 +33,7 @@ from pin_match.contract.crops import crop_boxes
 from pin_match.contract.matcher import N_VIEWS, Matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.matchers.patch import alpha_to_grid, patch_matcher
+from pin_match.matchers.common.patch import alpha_to_grid, patch_matcher
 from pin_match.scoring.cache import cache_dir
 
 STORE_VERSION = 1
