@@ -8,7 +8,7 @@ import pytest
 
 from pin_match.evaluation import EvalContext
 from pin_match.evaluation.core.intervals import weighted_auroc
-from pin_match.evaluation.core.metrics import Bootstrap, auroc, detection_metrics
+from pin_match.evaluation.core.metrics import Bootstrap, auroc, detection_metrics, frame_arrays
 from pin_match.evaluation.core.paired import (
     PairedError,
     disagreements,
@@ -35,7 +35,7 @@ def test_identical_matchers_differ_by_zero_with_an_interval_around_it():
     table = paired_comparison(a, a.copy(), 0.5, 0.5, boot=Bootstrap(n_boot=200))
     assert (table["B - A"] == 0).all()
     assert ((table["CI low"] <= 0) & (table["CI high"] >= 0)).all()
-    np.testing.assert_allclose(table.loc["AUROC", "A"], detection_metrics(a, 0.5)["auroc_target"])
+    np.testing.assert_allclose(table.loc["AUROC", "A"], detection_metrics(frame_arrays(a), 0.5)["auroc_target"])
 
 
 def test_better_on_every_episode_gives_an_interval_above_zero():

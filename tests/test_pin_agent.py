@@ -26,7 +26,7 @@ from pin_match.data.frameset import FrameSet
 from pin_match.data.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.labels import frame_labels
-from pin_match.evaluation.core.metrics import detection_metrics
+from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays
 from pin_match.evaluation.core.sigma import SigmaError
 from pin_match.pin_agent import FrameRecorder, PinAgentError, PinDetector, RecordingError
 
@@ -288,7 +288,8 @@ def metrics_of(fs: FrameSet, out) -> dict:
     from pin_match.scoring import RunOptions, score
 
     scored = split_frames(score(fs, "color", out=out, run=RunOptions(progress=False)), fs, None)
-    return {sigma: detection_metrics(scored, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
+    arr = frame_arrays(scored)
+    return {sigma: detection_metrics(arr, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
 
 
 @pytest.fixture(scope="module")

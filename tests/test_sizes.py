@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.core.metrics import detection_metrics
+from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays
 from pin_match.evaluation.core.sizes import (
     ALL,
     BANDS,
@@ -86,7 +86,7 @@ def test_size_table_by_hand():
 
 def test_the_all_row_is_the_pooled_metrics():
     scored, vis = scored_and_visibility()
-    pooled = detection_metrics(scored, SIGMA)
+    pooled = detection_metrics(frame_arrays(scored), SIGMA)
     row = size_table(scored, vis, SIGMA).loc[ALL]
     for key in ("auroc_same", "tm_pct", "cm_pct", "target_recall", "first_match_precision"):
         assert row[key] == pytest.approx(pooled[key]), key

@@ -129,7 +129,7 @@ def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module
     metrics at its sigma (AUROC target vs same-category is ``auroc_same``) and the
     per-category table.
     """
-    from pin_match.evaluation.core.metrics import detection_metrics, per_category
+    from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays, per_category
 
     ctx = EvalContext(fs)  # the labels once for both matchers
     out: dict[str, dict] = {}
@@ -138,6 +138,7 @@ def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module
         scored = scored[scored.split == split].reset_index(drop=True)
         if scored.empty:
             raise TrainingError(f"feature store {store.root} holds no frame of split {split!r}")
-        out[name] = dict(scored=scored, sigma=sigmas[name], metrics=detection_metrics(scored, sigmas[name]),
-                         per_category=per_category(scored, sigmas[name]))
+        arr = frame_arrays(scored)  # once for both tables
+        out[name] = dict(scored=scored, sigma=sigmas[name], metrics=detection_metrics(arr, sigmas[name]),
+                         per_category=per_category(arr, sigmas[name]))
     return out

@@ -161,9 +161,11 @@ def threshold_metrics(arr: FrameArrays, sigma: float) -> dict[str, float]:
     return {**c, **{k: float(v) for k, v in ratios(c).items()}}
 
 
-def detection_metrics(scored: Scored, sigma: float) -> dict[str, float | int | None]:
-    """Every metric of one matcher at threshold sigma (score >= sigma is matched); None = undefined."""
-    arr = as_arrays(scored)
+def detection_metrics(arr: FrameArrays, sigma: float) -> dict[str, float | int | None]:
+    """Every metric of one matcher at threshold sigma (score >= sigma is matched); None = undefined.
+
+    It reads a split's arrays (``EvalContext.arrays``, or ``frame_arrays`` of a scored table), converted once by the
+    caller for every metric, sweep and plot of that split."""
     out: dict[str, float | int | None] = {"sigma": float(sigma)}
     values = {**threshold_metrics(arr, sigma), **ranking_metrics(arr)}
     for k, v in values.items():

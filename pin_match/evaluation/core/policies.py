@@ -25,7 +25,6 @@ from pin_match.evaluation.core.metrics import (
     FrameArrays,
     Scored,
     as_arrays,
-    frame_arrays,
     threshold_metrics,
     to_python,
 )
@@ -43,13 +42,13 @@ from pin_match.scoring.table import ScoreTable
 MAX_CANDIDATES = 2000  # sigmas tried for a windowed policy (n > 1): every distinct score, or this many quantiles
 
 
-def policy_metrics(scored: pd.DataFrame, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
+def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
     """PIN's counts and metrics with "matched" read as "the policy fires", plus frames to the first firing.
 
     ``frames_to_first_match``: the mean, over episodes where the policy fires, of the 1-based
     position of the first frame where it does (NaN when it never fires).
     """
-    arr = frame_arrays(scored)
+    arr = as_arrays(scored)
     found = found_frames(arr, sigma, policy)
     out = threshold_metrics(fired_arrays(arr, found), 0.5)
     first = np.flatnonzero(found)
@@ -98,14 +97,14 @@ def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: 
     """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics (for a
     navigation objective, of the navigation estimate under the policy)."""
     ctx = EvalContext.of(fs)
-    scored = ctx.scored(table, split)
+    arr = ctx.arrays(table, split)
     navigation = objective in OBJECTIVES and OBJECTIVES[objective].navigation
-    curve = objective_curve(ctx, table, split, objective, policy) if navigation else policy_sweep(scored, policy)
+    curve = objective_curve(ctx, table, split, objective, policy) if navigation else policy_sweep(arr, policy)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
     return dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                 sigma=sigma, policy=str(policy), objective=objective, objective_value=value, split=split,
-                frameset_fingerprint=table.meta.get("frameset_fingerprint"), n_frames=len(scored),
+                frameset_fingerprint=table.meta.get("frameset_fingerprint"), n_frames=len(arr.score),
                 n_candidates=len(curve),
-                metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(scored, sigma, policy).items()},
+                metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(arr, sigma, policy).items()},
                 date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))

@@ -31,8 +31,6 @@ from pin_match.evaluation.core.metrics import (
     OM,
     TM,
     FrameArrays,
-    Scored,
-    as_arrays,
     ratios,
     threshold_metrics,
 )
@@ -77,15 +75,14 @@ def sweep_counts(arr: FrameArrays) -> tuple[np.ndarray, dict[str, np.ndarray]]:
     return values, counts
 
 
-def sweep(scored: Scored) -> pd.DataFrame:
+def sweep(arr: FrameArrays) -> pd.DataFrame:
     """One row per distinct score, ascending: sigma, every count and every threshold metric (NaN = undefined)."""
-    values, counts = sweep_counts(as_arrays(scored))
+    values, counts = sweep_counts(arr)
     return pd.DataFrame({"sigma": values, **counts, **ratios(counts)}, copy=False)  # no 25-column consolidation
 
 
-def sweep_loop(scored: Scored, sigmas: Sequence[float] | np.ndarray | None = None) -> pd.DataFrame:
+def sweep_loop(arr: FrameArrays, sigmas: Sequence[float] | np.ndarray | None = None) -> pd.DataFrame:
     """The same table, one full pass over the frames per threshold (default: every distinct score)."""
-    arr = as_arrays(scored)
     sigmas = np.unique(arr.score) if sigmas is None else np.asarray(sigmas, np.float64)
     rows = [{"sigma": float(s), **threshold_metrics(arr, float(s))} for s in sigmas]
     return pd.DataFrame(rows, columns=["sigma", *COUNT_KEYS, *METRIC_KEYS])

@@ -21,7 +21,7 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.evaluator import EvalContext
-from pin_match.evaluation.core.metrics import Scored, detection_metrics
+from pin_match.evaluation.core.metrics import Scored, as_arrays, detection_metrics
 from pin_match.evaluation.core.navigation import episodes_at, metrics_of, navigation_sweep, sweep_sigmas
 from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
 from pin_match.evaluation.core.sweep import sweep
@@ -81,7 +81,7 @@ def choose_sigma(table: pd.DataFrame, objective: str, match_floor: float = DEFAU
 
 def sigma_for(scored: Scored, objective: str = DEFAULT_OBJECTIVE, match_floor: float = DEFAULT_MATCH_FLOOR) -> float:
     """The sigma ``objective`` chooses on scored frames (a table or its arrays), as ``tune`` chooses it."""
-    curve = sweep(scored)
+    curve = sweep(as_arrays(scored))
     return float(curve["sigma"].iloc[choose_sigma(curve, objective, match_floor)[0]])
 
 
@@ -93,17 +93,17 @@ def tune(table: ScoreTable, data: FrameSet | EvalContext, objective: str = DEFAU
     split it lacks is an error that says how to go on (another split, an explicit sigma or the paper's).
     """
     ctx = EvalContext.of(data)
-    scored = ctx.arrays(table, split)
+    arr = ctx.arrays(table, split)
     curve = objective_curve(ctx, table, split, objective)
     index, value = choose_sigma(curve, objective, match_floor)
     sigma = float(curve["sigma"].iloc[index])
-    metrics = detection_metrics(scored, sigma)
+    metrics = detection_metrics(arr, sigma)
     if ctx.fs.navigation_missing is None:
         metrics.update(metrics_of(episodes_at(ctx.placements(table, split), sigma)))
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   sigma=sigma, objective=objective, objective_value=value, split=split,
                   frameset_fingerprint=table.meta.get("frameset_fingerprint"),
-                  n_frames=len(scored.score), n_candidates=len(curve), metrics_at_sigma=metrics,
+                  n_frames=len(arr.score), n_candidates=len(curve), metrics_at_sigma=metrics,
                   date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
     if objective == "tm-at-match":
         result["match_floor"] = match_floor

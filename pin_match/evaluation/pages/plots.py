@@ -10,7 +10,7 @@ import pandas as pd
 
 from pin_match import atomic
 from pin_match.evaluation.core.labels import CLASSES
-from pin_match.evaluation.core.metrics import Scored, as_arrays
+from pin_match.evaluation.core.metrics import FrameArrays
 
 MAX_PLOT_POINTS = 2000
 TITLE_WIDTH = 0.96  # share of the figure's width a title line may take
@@ -103,9 +103,8 @@ def _curves(curve: pd.DataFrame, sigma: float, series: tuple[tuple[str, str], ..
     _figure(path, title, draw)
 
 
-def plot_score_distributions(scored: Scored, sigma: float, path: str | Path, title: str = "") -> None:
+def plot_score_distributions(arr: FrameArrays, sigma: float, path: str | Path, title: str = "") -> None:
     """Score histograms of frames by what they show (target, same-category, other distractor, nothing)."""
-    arr = as_arrays(scored)
     bins = np.linspace(arr.score.min(), arr.score.max(), 50) if arr.score.size and np.ptp(arr.score) > 0 else 10
     names = dict(zip(CLASSES, ("target", "same category", "other distractor", "nothing")))
 
