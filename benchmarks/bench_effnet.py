@@ -24,7 +24,7 @@ from benchmarks.framesets import real_photos
 from benchmarks.timing import fastest, timed_score
 from pin_match import create_matcher
 from pin_match.contract.crops import crop_boxes
-from pin_match.matchers.backbones import network_input
+from pin_match.matchers.common.backbones import network_input
 
 CONFIGS = {"default (head, 448 px)": {}, "layer=blocks.3 img_size=224": {"layer": "blocks.3", "img_size": 224}}
 TARGET_RATIO = 0.9

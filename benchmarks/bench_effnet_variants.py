@@ -29,8 +29,8 @@ from benchmarks.framesets import real_photos
 from benchmarks.timing import fastest, once
 from pin_match import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
+from pin_match.evaluation.core.labels import frame_labels, scored_frames
+from pin_match.evaluation.core.metrics import frame_arrays, ranking_metrics
 from pin_match.scoring import RunOptions, score
 
 MAX_AUROC_CHANGE = 0.005

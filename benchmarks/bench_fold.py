@@ -22,14 +22,14 @@ from benchmarks.loadavg import load_1min
 from benchmarks.timing import fastest
 from pin_match import create_matcher
 from pin_match.contract import crop_boxes
-from pin_match.matchers.backbones import network_input
+from pin_match.matchers.common.backbones import network_input
 
 
 def run(quick: bool) -> dict:
     fs = real_lookalikes().split("val")
     frames = [fs.image(f) for f in fs.frames.frame_id[:4 if quick else 16]]
     unfolded = create_matcher("effnet")
-    with mock.patch("pin_match.matchers.backbones.fold_batch_norms", lambda *a: 0):
+    with mock.patch("pin_match.matchers.common.backbones.fold_batch_norms", lambda *a: 0):
         plain = unfolded.backbone
     folded = create_matcher("effnet").backbone
     crops = [image[c.y0:c.y0 + c.height, c.x0:c.x0 + c.width] for image in frames

@@ -35,8 +35,8 @@ from benchmarks.timing import Timing, fastest
 from pin_match import create_matcher
 from pin_match.contract import Matcher, Target
 from pin_match.data.frameset import FrameSet
-from pin_match.matchers.backbones import FeatureMapBackbone
-from pin_match.matchers.patch import PatchSimilarityMatcher
+from pin_match.matchers.common.backbones import FeatureMapBackbone
+from pin_match.matchers.common.patch import PatchSimilarityMatcher
 from pin_match.scoring import RunOptions, score
 
 MATCHERS = ("effnet", "verify")

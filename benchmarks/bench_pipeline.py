@@ -19,7 +19,7 @@ from benchmarks.framesets import synthetic
 from benchmarks.timing import once
 from pin_match.contract.crops import crop_boxes
 from pin_match.contract.registry import create_matcher
-from pin_match.matchers.backbones import network_input
+from pin_match.matchers.common.backbones import network_input
 from pin_match.scoring import RunOptions, score_to_file
 
 BATCH = 8  # frames per batch = 16 crops per forward

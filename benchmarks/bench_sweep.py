@@ -11,8 +11,8 @@ import numpy as np
 import pandas as pd
 
 from benchmarks.timing import fastest, once
-from pin_match.evaluation.metrics import frame_arrays
-from pin_match.evaluation.sweep import sweep, sweep_loop
+from pin_match.evaluation.core.metrics import frame_arrays
+from pin_match.evaluation.core.sweep import sweep, sweep_loop
 
 
 def synthetic_scored(n_frames: int, n_episodes: int, seed: int = 0) -> pd.DataFrame:
@@ -33,9 +33,9 @@ def synthetic_scored(n_frames: int, n_episodes: int, seed: int = 0) -> pd.DataFr
 def run(quick: bool = False) -> dict:
     n_frames, n_episodes, n_loop = (100_000, 3_000, 5) if quick else (1_000_000, 30_000, 10)
     df = synthetic_scored(n_frames, n_episodes)
-    sweep(df.iloc[:1000])  # warm-up: imports and first-call overheads
+    sweep(frame_arrays(df.iloc[:1000]))  # warm-up: imports and first-call overheads
     got: dict = {}  # what the timed calls return
-    t_sweep = fastest({"sweep": lambda: got.update(curve=sweep(df))}, repeats=3)["sweep"].wall_s
+    t_sweep = fastest({"sweep": lambda: got.update(curve=sweep(frame_arrays(df)))}, repeats=3)["sweep"].wall_s
     t_prepare = once(lambda: got.update(arrays=frame_arrays(df))).wall_s
     curve = got["curve"]
     sample = curve["sigma"].to_numpy()[np.linspace(0, len(curve) - 1, n_loop).astype(int)]

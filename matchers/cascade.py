@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from pin_match.contract import ConfigError, Frames, MatcherConfig, MatchResult, Modality, register_matcher
-from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
+from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
 
 
 def keypoint_bonus(keypoint_score: float, weight: float) -> float:

@@ -14,8 +14,8 @@ import torch
 import torch.nn.functional as F
 
 from pin_match.contract import MatcherError, Modality, Target, WeightsSpec, register_matcher
-from pin_match.matchers.backbones import OPEN_CLIP_FILES, OpenClipBackbone, PatchBackbone, TextBackbone
-from pin_match.matchers.patch import PatchConfig, PatchSimilarityMatcher, ReferencePrototypeMatcher
+from pin_match.matchers.common.backbones import OPEN_CLIP_FILES, OpenClipBackbone, PatchBackbone, TextBackbone
+from pin_match.matchers.common.patch import PatchConfig, PatchSimilarityMatcher, ReferencePrototypeMatcher
 
 
 def text_target(encode_text: Callable[[Sequence[str]], torch.Tensor], description: str,

@@ -43,7 +43,7 @@ from pin_match.contract import (
     weights_field,
 )
 from pin_match.contract.cohort import TargetCohort
-from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
+from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
 
 IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 COHORT_BATCH = 8

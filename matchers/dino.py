@@ -7,8 +7,8 @@ timm model, its input size, its weights, PIN's sigma and the paper.
 from __future__ import annotations
 
 from pin_match.contract import Preset, WeightsSpec, register_matcher
-from pin_match.matchers.backbones import TIMM_FILES, PatchBackbone, TimmBackbone
-from pin_match.matchers.patch import ReferencePrototypeMatcher
+from pin_match.matchers.common.backbones import TIMM_FILES, PatchBackbone, TimmBackbone
+from pin_match.matchers.common.patch import ReferencePrototypeMatcher
 
 DINO_PRESETS = {
     "dino": Preset(

@@ -8,8 +8,8 @@ import numpy as np
 import torch
 
 from pin_match.contract import load_torch_state, register_matcher
-from pin_match.matchers.keypoints import Keypoints
-from pin_match.matchers.kornia_glue import (
+from pin_match.matchers.common.keypoints import Keypoints
+from pin_match.matchers.common.kornia_glue import (
     LIGHTGLUE_LICENSE,
     KorniaGlueMatcher,
     build_lightglue,

@@ -17,8 +17,8 @@ from dataclasses import dataclass
 import torch
 
 from pin_match.contract import Preset, WeightsSpec, register_matcher
-from pin_match.matchers.backbones import EfficientNetBackbone, FeatureMapBackbone
-from pin_match.matchers.feature_maps import FeatureMapConfig, FeatureMapMatcher
+from pin_match.matchers.common.backbones import EfficientNetBackbone, FeatureMapBackbone
+from pin_match.matchers.common.feature_maps import FeatureMapConfig, FeatureMapMatcher
 
 PAPER = ("Tan & Le, EfficientNet: Rethinking Model Scaling for Convolutional Neural Networks, ICML 2019 "
          "(Lite variants: TensorFlow TPU models, 2020)")

@@ -34,8 +34,8 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.matchers.composite import CompositeMatcher
-from pin_match.matchers.fitted import FittedFileSpec, read_fitted_file
+from pin_match.matchers.common.composite import CompositeMatcher
+from pin_match.matchers.common.fitted import FittedFileSpec, read_fitted_file
 
 FUSION_FORMAT = "pin-match-fusion"
 FUSION_VERSION = 1

@@ -17,7 +17,7 @@ from pin_match.contract import (
     get_matcher_class,
     register_matcher,
 )
-from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
+from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
 
 
 def gated_count(points: np.ndarray, boxes: np.ndarray | None, box_scores: np.ndarray | None,

@@ -25,7 +25,7 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.matchers.patch import ReferencePrototypeMatcher, patch_matcher
+from pin_match.matchers.common.patch import ReferencePrototypeMatcher, patch_matcher
 
 
 @dataclass

@@ -17,8 +17,14 @@ import numpy as np
 import torch
 
 from pin_match.contract import MatchResult, Modality, WeightsSpec, register_matcher
-from pin_match.matchers.keypoints import Keypoints, PairMatches, count_verdict, mutual_matches, normalize_keypoints
-from pin_match.matchers.superpoint import SuperPointConfig, SuperPointGlueMatcher
+from pin_match.matchers.common.keypoints import (
+    Keypoints,
+    PairMatches,
+    count_verdict,
+    mutual_matches,
+    normalize_keypoints,
+)
+from pin_match.matchers.common.superpoint import SuperPointConfig, SuperPointGlueMatcher
 
 LIGHTGLUE_WEIGHTS = WeightsSpec("ETH-CVG/lightglue_superpoint",
                                 license="Apache-2.0 (LightGlue); SuperPoint's Magic Leap non-commercial license")

@@ -12,8 +12,8 @@ from __future__ import annotations
 import torch
 
 from pin_match.contract import WeightsSpec, register_matcher
-from pin_match.matchers.backbones import FeatureMapBackbone, MobileNetV2Backbone
-from pin_match.matchers.feature_maps import FeatureMapConfig, FeatureMapMatcher
+from pin_match.matchers.common.backbones import FeatureMapBackbone, MobileNetV2Backbone
+from pin_match.matchers.common.feature_maps import FeatureMapConfig, FeatureMapMatcher
 
 
 @register_matcher("mobilenetv2")

@@ -29,8 +29,8 @@ import torch
 import torch.nn.functional as F
 
 from pin_match.contract import ConfigError, MatcherConfig, MatcherError, MatchResult, Target, register_matcher
+from pin_match.matchers.common.patch import alpha_to_grid, patch_centres
 from pin_match.matchers.effnet import EffnetConfig, EffnetMatcher
-from pin_match.matchers.patch import alpha_to_grid, patch_centres
 
 AGGREGATES = ("topk", "mutual")
 

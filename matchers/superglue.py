@@ -15,7 +15,7 @@ import numpy as np
 import torch
 
 from pin_match.contract import ConfigError, MatchResult, Modality, WeightsSpec, register_matcher
-from pin_match.matchers.keypoints import (
+from pin_match.matchers.common.keypoints import (
     CombineConfig,
     Keypoints,
     PairMatches,
@@ -24,7 +24,7 @@ from pin_match.matchers.keypoints import (
     mutual_matches,
     normalize_keypoints,
 )
-from pin_match.matchers.superpoint import SuperPointConfig, SuperPointGlueMatcher
+from pin_match.matchers.common.superpoint import SuperPointConfig, SuperPointGlueMatcher
 
 SUPERGLUE_WEIGHTS = WeightsSpec("magic-leap-community/superglue_indoor",
                                 license="Magic Leap non-commercial research license (SuperPoint and SuperGlue)")

@@ -8,7 +8,7 @@ with the references'. This matcher does that with the default ``effnet``:
 
 1. **Locate**: the ``locate`` part's patch map (``effnet``: head at 448 px, PIN's crops) gives
    up to ``candidates`` regions: a peak and the cells around it within ``region_drop`` of its
-   score, grown to a box of the reference's aspect ratio (``matchers/candidates.py``).
+   score, grown to a box of the reference's aspect ratio (``matchers/common/candidates.py``).
 2. **Zoom**: each box is cut from the frame at its own resolution and embedded again at
    ``zoom_size`` (the ``zoom`` part: the locate network at that input size); each reference view
    is cut to its mask's box and embedded the same way.
@@ -67,11 +67,11 @@ from pin_match.contract import (
     weights_field,
 )
 from pin_match.contract.cohort import sigmoid
-from pin_match.matchers.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
-from pin_match.matchers.composite import CompositeMatcher, part_cfg_field
-from pin_match.matchers.fitted import FittedFileSpec, read_fitted_file
+from pin_match.matchers.common.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
+from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
+from pin_match.matchers.common.fitted import FittedFileSpec, read_fitted_file
+from pin_match.matchers.common.patch import PatchSimilarityMatcher, alpha_to_grid
 from pin_match.matchers.parts import part_matches, reference_cells
-from pin_match.matchers.patch import PatchSimilarityMatcher, alpha_to_grid
 from pin_match.nn.prototypes import masked_mean
 
 SIGNALS = ("proto", "margin", "desc", "cycle", "color", "keypoints")

@@ -12,8 +12,8 @@ import numpy as np
 import torch
 
 from pin_match.contract import ConfigError, WeightsSpec, load_torch_state, register_matcher
-from pin_match.matchers.keypoints import Keypoints
-from pin_match.matchers.kornia_glue import (
+from pin_match.matchers.common.keypoints import Keypoints
+from pin_match.matchers.common.kornia_glue import (
     GlueConfig,
     KorniaGlueMatcher,
     build_lightglue,

@@ -18,9 +18,12 @@ LAYERS = {
     "pin_match.atomic": 1, "pin_match.outputs": 1,
     "pin_match.contract": 2,
     "pin_match.nn": 3, "pin_match.data": 3,
-    "pin_match.matchers": 4,
+    "pin_match.matchers.common": 4, "pin_match.matchers": 4.1,  # helpers below the plug-ins that share them
     "pin_match.scoring": 5,
-    "pin_match.evaluation": 6,
+    # evaluation's rooms, in the order a run flows through them: the metrics core, the pages that draw it, the flows
+    # that compose both; the package's face re-exports from core and flows
+    "pin_match.evaluation.core": 6, "pin_match.evaluation.pages": 6.1, "pin_match.evaluation.flows": 6.2,
+    "pin_match.evaluation": 6.3,
     "pin_match.training": 7, "pin_match.fitting": 7, "pin_match.pin_agent": 7,
     "pin_match.cli": 8,
 }
@@ -68,7 +71,7 @@ def imports_of_file(path: Path, package: str) -> set[str]:
 
 
 def library_files() -> list[Path]:
-    return sorted([*(ROOT / "pin_match").rglob("*.py"), *(ROOT / "matchers").glob("*.py")])
+    return sorted([*(ROOT / "pin_match").rglob("*.py"), *(ROOT / "matchers").rglob("*.py")])
 
 
 def test_every_library_module_belongs_to_a_layer():
@@ -173,6 +176,17 @@ def _built_ins() -> list[str]:
     return [n for n in list_matchers() if get_matcher_class(n).__module__.startswith(f"{BUILTIN_PACKAGE}.")]
 
 
+def test_each_plug_in_module_registers_a_matcher_and_no_helper_does():
+    """matchers/ at a glance: one module per algorithm at the top, the helpers they share in matchers/common."""
+    from pin_match.contract.registry import BUILTIN_PACKAGE, get_matcher_class
+
+    registering = {get_matcher_class(n).__module__ for n in _built_ins()}
+    top = {f"{BUILTIN_PACKAGE}.{p.stem}" for p in (ROOT / "matchers").glob("*.py") if p.name != "__init__.py"}
+    assert registering == top, (f"top-level modules that register nothing (move them to matchers/common): "
+                                f"{sorted(top - registering)}; modules elsewhere that register: "
+                                f"{sorted(registering - top)}")
+
+
 def test_a_built_in_without_a_held_id_is_reported_not_failed():
     """Every name IDS holds is still a built-in; one it does not hold yet is named with the line to add."""
     built_ins = _built_ins()
@@ -213,11 +227,12 @@ def test_a_built_wheel_ships_the_paper_thresholds_and_every_subpackage(tmp_path)
                     str(tmp_path), str(source)], check=True, capture_output=True)
     (wheel,) = tmp_path.glob("pin_match-*.whl")
     names = set(zipfile.ZipFile(wheel).namelist())
-    assert "pin_match/evaluation/paper_thresholds.json" in names
+    assert "pin_match/evaluation/core/paper_thresholds.json" in names
     for init in (ROOT / "pin_match").rglob("__init__.py"):
         package = init.parent.relative_to(ROOT)
         assert init.relative_to(ROOT).as_posix() in names, f"add {package} to pyproject's packages"
-    assert "pin_match/matchers/__init__.py" in names
+    for init in (ROOT / "matchers").rglob("__init__.py"):
+        assert f"pin_match/{init.relative_to(ROOT).as_posix()}" in names, f"add {init.parent} to pyproject's packages"
     assert not any(n.startswith(("matchers/", "examples/")) or n.endswith("my_matcher.py") for n in names)
     assert {"pin_match/data/sources/lookalike_src/photos.csv", "pin_match/data/sources/lookalike_src/NOTICE.md",
             "pin_match/matchers/fusion_lookalike.json", "pin_match/matchers/verify_myvlm.json",

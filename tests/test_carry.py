@@ -6,7 +6,10 @@ import numpy as np
 import pytest
 
 from pin_match.cli import main
-from pin_match.evaluation.carry import (
+from pin_match.evaluation.core.intervals import instance_clusters
+from pin_match.evaluation.core.labels import frame_labels
+from pin_match.evaluation.core.metrics import Bootstrap
+from pin_match.evaluation.flows.carry import (
     CarryError,
     ScoredSet,
     carried,
@@ -16,9 +19,6 @@ from pin_match.evaluation.carry import (
     leave_one_out,
     pooled,
 )
-from pin_match.evaluation.intervals import instance_clusters
-from pin_match.evaluation.labels import frame_labels
-from pin_match.evaluation.metrics import Bootstrap
 
 BOOT = Bootstrap(n_boot=50)
 # per episode of the tiny set: step 0 the target, 1 a same-category look-alike, 2 another object, 3 nothing
@@ -140,7 +140,7 @@ def shifted_house(fs, shift: float, val_shift: float | None = None) -> ScoredSet
 
 
 def test_a_house_relative_line_carries_a_level_shift_upward_but_sigma_stays_absolute(tiny_frameset):
-    from pin_match.evaluation.stop import HouseStop
+    from pin_match.evaluation.core.stop import HouseStop
 
     sets = {"low": shifted_house(tiny_frameset, 0.0), "high": shifted_house(tiny_frameset, 0.3)}
     plain = leave_one_out(sets, BOOT).set_index("set")
@@ -165,7 +165,7 @@ def test_the_policy_is_chosen_without_the_set_it_is_read_on(tiny_frameset):
     no CM and no precision gap, half the episodes lost, as at each set's own best sigma. The house line serves both
     at sigma 0.6 (success 50 points above PIN's own best); the success gap breaks the tie, so the house policy is
     chosen without each set and stops on the target everywhere."""
-    from pin_match.evaluation.stop import FIRST_MATCH, HouseStop
+    from pin_match.evaluation.core.stop import FIRST_MATCH, HouseStop
 
     shifts = ((0.0, 0.3), (0.3, 0.0), (0.0, 0.3))
     sets = {f"h{i}": shifted_house(tiny_frameset, low, high) for i, (low, high) in enumerate(shifts)}

@@ -17,7 +17,7 @@ import pytest
 
 from conftest import make_view
 from pin_match import Target, create_matcher
-from pin_match.evaluation.labels import frame_labels, scored_frames
+from pin_match.evaluation.core.labels import frame_labels, scored_frames
 from pin_match.scoring import RunOptions, score
 
 
@@ -121,7 +121,7 @@ def test_color_separates_colour_look_alikes_of_the_default_set_better_than_print
     import pandas as pd
 
     from pin_match.data.synth.scans import PACKAGED_SCANS
-    from pin_match.evaluation.metrics import auroc
+    from pin_match.evaluation.core.metrics import auroc
 
     kind = pd.read_csv(PACKAGED_SCANS / "families.csv").set_index("scan").difference
     table = score(default_synth, "color", out=tmp_path, split="val", run=RunOptions(progress=False))

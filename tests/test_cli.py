@@ -231,7 +231,7 @@ def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frame
 
     from markupsafe import escape
 
-    from pin_match.evaluation.demo import LOOKALIKES, SCANNED
+    from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED
 
     shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")  # no seed recorded: kept as the scanned set
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
@@ -255,7 +255,7 @@ def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
     look-alikes under ``lookalikes/`` and prints their table first."""
     import shutil
 
-    from pin_match.evaluation.demo import LOOKALIKES, SCANNED
+    from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED
 
     shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--lookalike-matcher", "color",
@@ -277,8 +277,8 @@ def test_demo_builds_again_a_frameset_made_with_another_seed(tiny_frameset, tmp_
     import shutil
 
     from pin_match.data.frameset import MANIFEST, FrameSet
-    from pin_match.evaluation.bench import Stopwatch
-    from pin_match.evaluation.demo import _load_or_make
+    from pin_match.evaluation.flows.bench import Stopwatch
+    from pin_match.evaluation.flows.demo import _load_or_make
 
     made = []
 

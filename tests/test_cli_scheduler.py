@@ -47,7 +47,7 @@ def _seen_run(monkeypatch, module, name: str) -> list:
 @pytest.mark.parametrize("command", ["bench", "carry", "demo", "features"])
 def test_the_scheduler_reaches_the_scoring_engine(command, tiny_frameset, tmp_path, monkeypatch, cluster, capsys):
     from pin_match import scoring
-    from pin_match.evaluation import bench, demo
+    from pin_match.evaluation.flows import bench, demo
     from pin_match.training import features
 
     fs = str(tiny_frameset.root)

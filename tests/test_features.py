@@ -12,7 +12,7 @@ from pin_match.cli import main
 from pin_match.contract import ConfigError
 from pin_match.contract.crops import crop_boxes
 from pin_match.data.writer import FrameSetWriter
-from pin_match.matchers.patch import alpha_to_grid, patch_matcher
+from pin_match.matchers.common.patch import alpha_to_grid, patch_matcher
 from pin_match.scoring.options import RunOptions
 from pin_match.training.features import DamagedStoreError, FeatureStore, FeatureStoreError, build_features
 from pin_match.training.frame_tokens import FRAME_TOKENS, array_path, patch_coverage
@@ -68,7 +68,8 @@ def test_coverage_of_a_crop_not_divisible_by_the_grid():
 def test_the_store_is_reused_not_rebuilt(store, tiny_frameset, dino_cfg, monkeypatch):
     out = store.path.parents[2]
     stamps = {path: os.stat(path).st_mtime_ns for path in store.files()}
-    monkeypatch.setattr("pin_match.matchers.backbones.TimmBackbone.encode", lambda *a, **k: pytest.fail("backbone ran"))
+    monkeypatch.setattr("pin_match.matchers.common.backbones.TimmBackbone.encode",
+                        lambda *a, **k: pytest.fail("backbone ran"))
     again = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=out, run=QUIET)
     assert again.path == store.path and {path: os.stat(path).st_mtime_ns for path in again.files()} == stamps
 
@@ -93,7 +94,7 @@ def test_a_matcher_without_patch_features_is_refused(tiny_frameset, tmp_path):
 def test_a_build_cut_off_resumes_from_its_chunks(store, tiny_frameset, dino_cfg, tmp_path, monkeypatch):
     """Killed in the second episode: that episode's chunk and the store are absent, the first episode's chunk is
     kept; the rebuild encodes only the second episode's frames and gives the uninterrupted store's arrays."""
-    from pin_match.matchers.backbones import TimmBackbone
+    from pin_match.matchers.common.backbones import TimmBackbone
 
     real, crops = TimmBackbone.encode, []
     frames_per_episode = tiny_frameset.frames.groupby("episode_id").size()
@@ -140,7 +141,8 @@ def test_a_damaged_store_is_named_and_rebuilt_from_its_chunks(store, tiny_frames
     with pytest.raises(DamagedStoreError, match=rf"^cannot read the feature store file {tokens} .*run pin-match "
                                                 rf"features again"):
         FeatureStore.open(path)
-    monkeypatch.setattr("pin_match.matchers.backbones.TimmBackbone.encode", lambda *a, **k: pytest.fail("backbone ran"))
+    monkeypatch.setattr("pin_match.matchers.common.backbones.TimmBackbone.encode",
+                        lambda *a, **k: pytest.fail("backbone ran"))
     healed = build_features(tiny_frameset, "dino", overrides=dino_cfg, out=tmp_path / "features", run=QUIET)
     np.testing.assert_array_equal(healed.frames, store.frames)
     path.write_bytes(b"not parquet")

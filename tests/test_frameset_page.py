@@ -7,7 +7,7 @@ import re
 import numpy as np
 
 from pin_match.cli.main import main
-from pin_match.evaluation.frameset_page import counts, cutout_problems
+from pin_match.evaluation.pages.frameset_page import counts, cutout_problems
 
 
 def _view(opaque_fraction: float, seed: int = 0) -> np.ndarray:

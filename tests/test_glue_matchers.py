@@ -59,7 +59,7 @@ def test_stereo_pair_matches_far_more_than_an_unrelated_photo(name, stereo):
 
 def test_verdict_counts_object_matches_per_reference_and_points_once():
     """Hand-made matches of a 4-keypoint observation against two references."""
-    from pin_match.matchers.keypoints import PairMatches, combined_verdict, on_object_count
+    from pin_match.matchers.common.keypoints import PairMatches, combined_verdict, on_object_count
 
     def glue_verdict(pairs, xy, combine):
         return combined_verdict(pairs, xy, combine, on_object_count)
@@ -195,8 +195,8 @@ def realset_fs(tmp_path_factory):
 
 
 def ranking_on(fs, name: str, tmp_path, **overrides) -> dict[str, float]:
-    from pin_match.evaluation.labels import frame_labels, scored_frames
-    from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
+    from pin_match.evaluation.core.labels import frame_labels, scored_frames
+    from pin_match.evaluation.core.metrics import frame_arrays, ranking_metrics
     from pin_match.scoring import RunOptions, score
 
     table = score(fs, name, overrides=overrides, out=tmp_path / "scores", run=RunOptions(progress=False))

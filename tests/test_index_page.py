@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pandas as pd
 
-from pin_match.evaluation.compare import Comparison
-from pin_match.evaluation.index_page import comparison_lines
+from pin_match.evaluation.flows.compare import Comparison
+from pin_match.evaluation.flows.index_page import comparison_lines
 
 
 def _comparison(fm_prec_diff: float) -> Comparison:

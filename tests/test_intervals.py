@@ -8,14 +8,14 @@ import numpy as np
 import pytest
 from test_metrics import hand_scored
 
-from pin_match.evaluation.intervals import (
+from pin_match.evaluation.core.intervals import (
     bootstrap_ci,
     episode_weights,
     instance_clusters,
     percentile_interval,
     unit_codes,
 )
-from pin_match.evaluation.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
+from pin_match.evaluation.core.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
 
 
 def test_bootstrap_is_seeded_and_honours_undefined():
@@ -32,7 +32,8 @@ def test_bootstrap_is_seeded_and_honours_undefined():
 
 def test_episodes_of_one_instance_are_drawn_together():
     df = hand_scored()
-    point = {**detection_metrics(df, 0.6), **ranking_metrics(frame_arrays(df))}
+    arr = frame_arrays(df)
+    point = {**detection_metrics(arr, 0.6), **ranking_metrics(arr)}
     # one instance behind all three episodes: every resample holds each episode once -> point intervals
     together = bootstrap_ci(df, 0.6, clusters=dict(A="x", B="x", C="x"), boot=Bootstrap(n_boot=50))
     for key in ("tm_pct", "cm_pct", "match_pct", "first_match_success", "auroc_target", "auroc_same"):

@@ -13,10 +13,10 @@ from pin_match.contract import WeightsError
 from pin_match.data.frameset import FrameSetError
 from pin_match.data.importer import import_recording
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.analysis import AnalysisError, load_bench
-from pin_match.evaluation.layout import BenchLayout
-from pin_match.evaluation.sigma import SigmaError, load_threshold
-from pin_match.matchers.fitted import read_fitted_file
+from pin_match.evaluation.core.analysis import AnalysisError, load_bench
+from pin_match.evaluation.core.layout import BenchLayout
+from pin_match.evaluation.core.sigma import SigmaError, load_threshold
+from pin_match.matchers.common.fitted import read_fitted_file
 from pin_match.nn.head import CONFIG_FILE, HeadError, read_head_config
 from pin_match.pin_agent.recorder import INDEX, FrameRecorder, RecordingError
 

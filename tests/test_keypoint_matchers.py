@@ -15,15 +15,15 @@ from conftest import striped_mug
 from pin_match.contract import registry
 from pin_match.contract.matcher import ConfigError, Matcher, MatcherConfig, MatcherError, MatchResult, Modality
 from pin_match.contract.registry import create_matcher
-from pin_match.matchers.ieve import gated_count
-from pin_match.matchers.keypoints import (
+from pin_match.matchers.common.keypoints import (
     combined_verdict,
     confidence_sum,
     count_verdict,
     normalize_keypoints,
     valid_matches,
 )
-from pin_match.matchers.references import prepare_references, square_box
+from pin_match.matchers.common.references import prepare_references, square_box
+from pin_match.matchers.ieve import gated_count
 
 
 @pytest.fixture(scope="module")
@@ -359,7 +359,7 @@ def corner_keypoints(detector, grays, device, max_keypoints=-1):
     """A deterministic stand-in for SuperPoint (whose tiny random weights put every keypoint on the top rows with
     equal scores): Shi-Tomasi corners, their min-eigenvalue response as score, a fixed random projection of the
     9x9 patch as descriptor. Counts differ between images, which is what padding gets wrong."""
-    from pin_match.matchers.keypoints import Keypoints
+    from pin_match.matchers.common.keypoints import Keypoints
 
     proj = np.random.default_rng(7).standard_normal((81, 32))
     found = []
@@ -388,7 +388,7 @@ def superglue_peaky_dir(tmp_path_factory):
 @pytest.mark.parametrize("iterations", [20, 3])
 def test_superglue_per_reference_sums_equal_magicleaps_algorithm(monkeypatch, superglue_peaky_dir, target,
                                                                  iterations):
-    import pin_match.matchers.superpoint as superpoint
+    import pin_match.matchers.common.superpoint as superpoint
 
     monkeypatch.setattr(superpoint, "detect", corner_keypoints)
     sums = {}
@@ -488,8 +488,8 @@ def lightglue_variant(request, tmp_path_factory):
 
 
 def test_lightglue_pairs_equal_cvg_lightglue_on_the_same_keypoints(monkeypatch, lightglue_variant, target):
+    import pin_match.matchers.common.superpoint as superpoint
     import pin_match.matchers.lightglue as lightglue
-    import pin_match.matchers.superpoint as superpoint
 
     variant, weights = lightglue_variant
     monkeypatch.setattr(superpoint, "detect", corner_keypoints)

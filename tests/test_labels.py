@@ -6,9 +6,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.gallery import frame_roles
-from pin_match.evaluation.labels import CM, GM, OM, TM, UNUSED, class_weights, frame_classes
-from pin_match.evaluation.metrics import frame_arrays
+from pin_match.evaluation.core.labels import CM, GM, OM, TM, UNUSED, class_weights, frame_classes
+from pin_match.evaluation.core.metrics import frame_arrays
+from pin_match.evaluation.pages.gallery import frame_roles
 from pin_match.fitting.fusion import fit_classes
 from pin_match.fitting.logistic import FitError
 

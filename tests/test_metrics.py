@@ -8,11 +8,12 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.metrics import (
+from pin_match.evaluation.core.metrics import (
     MetricsError,
     auroc,
     average_precision,
     detection_metrics,
+    frame_arrays,
     localisation_metrics,
     per_category,
 )
@@ -43,7 +44,7 @@ def hand_scored(shuffle: bool = True) -> pd.DataFrame:
 
 
 def test_metrics_at_sigma_with_ties_counted_as_matched():
-    m = detection_metrics(hand_scored(), 0.6)
+    m = detection_metrics(frame_arrays(hand_scored()), 0.6)
     # matched (score >= 0.6): a0 TM, a1 CM, b0 GM, b1 TM, b2 CM (b1, b2 tie at sigma) -> 5 frames
     assert (m["n_matched"], m["n_tm"], m["n_cm"], m["n_gm"], m["n_om"]) == (5, 2, 2, 1, 0)
     assert m["tm_pct"] == pytest.approx(40.0) and m["cm_pct"] == pytest.approx(40.0)
@@ -60,7 +61,7 @@ def test_metrics_at_sigma_with_ties_counted_as_matched():
 
 
 def test_ranking_metrics_by_hand():
-    m = detection_metrics(hand_scored(), 0.6)
+    m = detection_metrics(frame_arrays(hand_scored()), 0.6)
     # target {.9 .5 .6 .4} vs rest {.7 .2 .8 .6 .1 .3}: pairs won 6 + 3 + 3.5 (tie at .6) + 3 = 15.5 of 24
     assert m["auroc_target"] == pytest.approx(15.5 / 24)
     # PR steps at .9 (1/1), .6 (2/5), .5 (3/6), .4 (4/7), each a quarter of recall
@@ -72,14 +73,14 @@ def test_ranking_metrics_by_hand():
 
 
 def test_no_matched_frame_is_undefined_not_zero():
-    m = detection_metrics(hand_scored(), 1.0)
+    m = detection_metrics(frame_arrays(hand_scored()), 1.0)
     for key in ("tm_pct", "cm_pct", "nm_pct", "gm_pct", "om_pct", "first_match_precision"):
         assert m[key] is None, key
     assert m["match_pct"] == 0.0 and m["target_recall"] == 0.0 and m["first_match_success"] == 0.0
 
 
 def test_all_frames_matched():
-    m = detection_metrics(hand_scored(), 0.0)
+    m = detection_metrics(frame_arrays(hand_scored()), 0.0)
     # 10 matched: TM a0 a3 b1 c1, CM a1 b2, GM b0 c0, OM a2 b3; first frames a0 (TM), b0, c0 (GM)
     assert (m["tm_pct"], m["cm_pct"], m["gm_pct"], m["om_pct"], m["nm_pct"]) == pytest.approx((40, 20, 20, 20, 40))
     assert m["match_pct"] == 100.0 and m["target_recall"] == 100.0
@@ -89,10 +90,10 @@ def test_all_frames_matched():
 def test_undefined_denominators():
     df = hand_scored()
     no_target = df[~df.target_visible]
-    m = detection_metrics(no_target, 0.6)
+    m = detection_metrics(frame_arrays(no_target), 0.6)
     assert m["target_recall"] is None and m["auroc_target"] is None and m["ap_target"] is None
     unknown_seen = df.assign(target_seen=np.where(df.frame_id == "a0", np.nan, df.target_seen))
-    m = detection_metrics(unknown_seen, 0.6)
+    m = detection_metrics(frame_arrays(unknown_seen), 0.6)
     assert m["target_recall_seen"] is None and m["n_seen"] is None
     assert m["target_recall"] == pytest.approx(50.0)
 
@@ -101,14 +102,14 @@ def test_nan_score_is_rejected_naming_the_frame():
     df = hand_scored()
     df.loc[df.frame_id == "b2", "score"] = np.nan
     with pytest.raises(MetricsError, match="'b2'"):
-        detection_metrics(df, 0.5)
+        frame_arrays(df)
 
 
 def test_duplicate_step_is_rejected():
     df = hand_scored()
     df.loc[df.frame_id == "a1", "step"] = 0
     with pytest.raises(MetricsError, match="episode 'A'"):
-        detection_metrics(df, 0.5)
+        frame_arrays(df)
 
 
 def test_per_category():

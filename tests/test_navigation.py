@@ -13,10 +13,10 @@ from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import CameraModel, EpisodeGeometry, GeometryError, Pose, back_project
 from pin_match.data.writer import Frame, FrameSetWriter
 from pin_match.evaluation import EvalContext, evaluate, report, tune
-from pin_match.evaluation.navigation import NavigationError, episodes_at, metrics_of, navigation_metrics
-from pin_match.evaluation.sigma import SigmaChoice
-from pin_match.evaluation.tables import report_row, side_by_side
-from pin_match.evaluation.tuning import TuningError
+from pin_match.evaluation.core.navigation import NavigationError, episodes_at, metrics_of, navigation_metrics
+from pin_match.evaluation.core.sigma import SigmaChoice
+from pin_match.evaluation.core.tables import report_row, side_by_side
+from pin_match.evaluation.core.tuning import TuningError
 from pin_match.scoring.table import ScoreTable
 
 SIZE = 40  # square frames, HFOV 90 degrees: focal 20 px, the centre pixel (20, 20) looks straight ahead

@@ -14,8 +14,8 @@ import pytest
 
 from pin_match.data.synth import SynthSize, generate
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.analysis import AnalysisError, load_bench
-from pin_match.evaluation.bench import bench
+from pin_match.evaluation.core.analysis import AnalysisError, load_bench
+from pin_match.evaluation.flows.bench import bench
 from pin_match.scoring import RunOptions
 
 REPO = Path(__file__).resolve().parents[1]

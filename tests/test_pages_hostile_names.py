@@ -19,7 +19,7 @@ import pytest
 from conftest import make_view, paint
 from pin_match import CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.tables import markdown_table
+from pin_match.evaluation.core.tables import markdown_table
 from pin_match.scoring import RunOptions
 
 # ids and matcher names become file names, so they hold no "/"; the category holds a whole script element
@@ -142,10 +142,10 @@ def check_page(path: Path, names: list[str]) -> Page:
 @pytest.fixture(scope="module")
 def pages(hostile_matchers, hostile_frameset, tmp_path_factory):
     """bench (tuned on train) + compare + index, and inspect, all written for the hostile set."""
-    from pin_match.evaluation.bench import bench
-    from pin_match.evaluation.compare import compare_bench
-    from pin_match.evaluation.frameset_page import write_frameset_page
-    from pin_match.evaluation.index_page import SetResults, write_index
+    from pin_match.evaluation.flows.bench import bench
+    from pin_match.evaluation.flows.compare import compare_bench
+    from pin_match.evaluation.flows.index_page import SetResults, write_index
+    from pin_match.evaluation.pages.frameset_page import write_frameset_page
 
     out = tmp_path_factory.mktemp("pages")
     done = bench(EvalContext(hostile_frameset, Bootstrap(n_boot=20)), [MATCHER_A, MATCHER_B], out / "bench",

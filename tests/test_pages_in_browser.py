@@ -21,8 +21,8 @@ from PIL import Image
 from test_report_page import SIGMA, make_table
 
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.frameset_page import write_frameset_page
-from pin_match.evaluation.report import report
+from pin_match.evaluation.flows.report import report
+from pin_match.evaluation.pages.frameset_page import write_frameset_page
 
 BROWSERS = ("chromium", "chromium-browser", "google-chrome", "google-chrome-stable")
 PROBE = """<script>
@@ -92,7 +92,7 @@ def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
 
     from markupsafe import escape
 
-    from pin_match.evaluation.demo import LOOKALIKES, SCANNED, demo
+    from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED, demo
     from pin_match.scoring import RunOptions
 
     def copy(out: Path, seed: int, run: RunOptions):

@@ -7,9 +7,9 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import EvalContext
-from pin_match.evaluation.intervals import weighted_auroc
-from pin_match.evaluation.metrics import Bootstrap, auroc, detection_metrics
-from pin_match.evaluation.paired import (
+from pin_match.evaluation.core.intervals import weighted_auroc
+from pin_match.evaluation.core.metrics import Bootstrap, auroc, detection_metrics, frame_arrays
+from pin_match.evaluation.core.paired import (
     PairedError,
     disagreements,
     first_match_outcomes,
@@ -35,7 +35,7 @@ def test_identical_matchers_differ_by_zero_with_an_interval_around_it():
     table = paired_comparison(a, a.copy(), 0.5, 0.5, boot=Bootstrap(n_boot=200))
     assert (table["B - A"] == 0).all()
     assert ((table["CI low"] <= 0) & (table["CI high"] >= 0)).all()
-    np.testing.assert_allclose(table.loc["AUROC", "A"], detection_metrics(a, 0.5)["auroc_target"])
+    np.testing.assert_allclose(table.loc["AUROC", "A"], detection_metrics(frame_arrays(a), 0.5)["auroc_target"])
 
 
 def test_better_on_every_episode_gives_an_interval_above_zero():
@@ -109,8 +109,8 @@ def test_different_frames_are_refused():
 def test_compare_writes_the_folder(tiny_frameset, tmp_path):
     from test_report_page import make_table
 
-    from pin_match.evaluation.compare import AtSigma, compare
-    from pin_match.evaluation.sigma import SigmaChoice
+    from pin_match.evaluation.core.sigma import SigmaChoice
+    from pin_match.evaluation.flows.compare import AtSigma, compare
     from pin_match.scoring.table import ScoreTable
 
     a = make_table(tiny_frameset)

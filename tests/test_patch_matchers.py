@@ -13,11 +13,11 @@ from tiny_weights import TINY_CLIP, save_tiny_open_clip, save_tiny_timm_vit
 from pin_match import Modality, Target, create_matcher
 from pin_match.contract.registry import get_matcher_class
 from pin_match.contract.weights import WeightsError
-from pin_match.evaluation.sigma import PAPER_THRESHOLDS
-from pin_match.matchers.backbones import PatchFeatures
+from pin_match.evaluation.core.sigma import PAPER_THRESHOLDS
 from pin_match.matchers.clip import ClipMatcher, ClipTextMatcher
+from pin_match.matchers.common.backbones import PatchFeatures
+from pin_match.matchers.common.patch import alpha_to_grid, patch_centres
 from pin_match.matchers.dino import DinoMatcher, Dinov2Matcher
-from pin_match.matchers.patch import alpha_to_grid, patch_centres
 from pin_match.nn.prototypes import patch_scores
 
 ROOT = Path(__file__).resolve().parents[1]

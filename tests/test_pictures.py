@@ -6,8 +6,8 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.contract.cohort import TargetCohort
-from pin_match.evaluation import html
-from pin_match.evaluation.pictures import cohort_members
+from pin_match.evaluation.pages import html
+from pin_match.evaluation.pages.pictures import cohort_members
 
 
 def test_a_cohort_member_without_its_image_is_named_not_dropped(tmp_path):

@@ -25,9 +25,9 @@ from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.data.importer import OTHER_ID, SAME_CATEGORY_ID, TARGET_ID
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.labels import frame_labels
-from pin_match.evaluation.metrics import detection_metrics
-from pin_match.evaluation.sigma import SigmaError
+from pin_match.evaluation.core.labels import frame_labels
+from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays
+from pin_match.evaluation.core.sigma import SigmaError
 from pin_match.pin_agent import FrameRecorder, PinAgentError, PinDetector, RecordingError
 
 RESIZE_DIM = 224
@@ -166,7 +166,7 @@ def test_a_square_is_one_crop_for_every_crop_policy(tiny_frameset):
 
 # ---------------------------------------------------------------------- detector: sigma and construction
 def test_sigma_from_a_tuned_file_the_paper_or_given(tiny_frameset, tmp_path):
-    from pin_match.evaluation.tuning import tune, write_thresholds
+    from pin_match.evaluation.core.tuning import tune, write_thresholds
     from pin_match.scoring import RunOptions, score
 
     table = score(tiny_frameset, "color", out=tmp_path / "scores", run=RunOptions(progress=False))
@@ -288,7 +288,8 @@ def metrics_of(fs: FrameSet, out) -> dict:
     from pin_match.scoring import RunOptions, score
 
     scored = split_frames(score(fs, "color", out=out, run=RunOptions(progress=False)), fs, None)
-    return {sigma: detection_metrics(scored, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
+    arr = frame_arrays(scored)
+    return {sigma: detection_metrics(arr, sigma) for sigma in np.quantile(scored.score, [0.25, 0.5, 0.75])}
 
 
 @pytest.fixture(scope="module")

@@ -10,9 +10,9 @@ import pytest
 
 from pin_match.contract.registry import available_names
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.report import report
-from pin_match.evaluation.sigma import SigmaChoice
-from pin_match.evaluation.tuning import OBJECTIVES
+from pin_match.evaluation.core.sigma import SigmaChoice
+from pin_match.evaluation.core.tuning import OBJECTIVES
+from pin_match.evaluation.flows.report import report
 from pin_match.scoring.table import ScoreTable
 
 matplotlib.use("Agg")
@@ -83,7 +83,7 @@ def test_report_plots_keep_titles_and_legends_inside_the_figure(tiny_frameset, t
 
 
 def test_titles_break_between_clauses_first_then_words_then_inside_a_word():
-    from pin_match.evaluation.plots import _lines
+    from pin_match.evaluation.pages.plots import _lines
 
     def fits(line: str) -> bool:
         return len(line) <= 30

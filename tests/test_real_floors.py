@@ -8,8 +8,8 @@ from __future__ import annotations
 
 import pytest
 
-from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.evaluation.metrics import frame_arrays, ranking_metrics
+from pin_match.evaluation.core.labels import frame_labels, scored_frames
+from pin_match.evaluation.core.metrics import frame_arrays, ranking_metrics
 from pin_match.scoring import RunOptions, score
 
 # frame-set fixture, matcher, floor of AUROC target vs same-category look-alike, floor of target vs every other frame

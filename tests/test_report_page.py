@@ -9,9 +9,16 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.gallery import OUTLINE_RGB, POINT_RGB, draw_frame, frame_points, section_figure, sections
-from pin_match.evaluation.labels import frame_labels, scored_frames
-from pin_match.evaluation.report import report
+from pin_match.evaluation.core.labels import frame_labels, scored_frames
+from pin_match.evaluation.flows.report import report
+from pin_match.evaluation.pages.gallery import (
+    OUTLINE_RGB,
+    POINT_RGB,
+    draw_frame,
+    frame_points,
+    section_figure,
+    sections,
+)
 from pin_match.scoring.table import ScoreTable
 
 # per episode, steps 0..3 show: the target, a same-category look-alike, an other-category object, nothing
@@ -98,7 +105,7 @@ def test_report_writes_a_self_contained_page(tiny, tmp_path):
 def test_the_images_folder_starts_empty_and_one_that_cannot_be_emptied_is_named(tmp_path):
     """Issue 43.3b: a folder the page could not empty was once passed over, leaving the old images beside the page."""
     from pin_match.errors import PinMatchError
-    from pin_match.evaluation.html import Assets
+    from pin_match.evaluation.pages.html import Assets
 
     page = tmp_path / "report.html"
     Assets(page, "report_files")  # no earlier page: nothing to remove
@@ -125,7 +132,7 @@ def test_a_normalised_tables_report_shows_each_targets_cohort_beside_its_scores(
     """Issue 44.3: per target the scale and its closest cohort members, and the members beside a look-alike."""
     from pin_match import atomic
     from pin_match.contract.cohort import TargetCohort
-    from pin_match.evaluation.scales import scale_table, target_cohorts
+    from pin_match.evaluation.pages.scales import scale_table, target_cohorts
 
     fs, stub = tiny
     folder = tmp_path / "cohort"

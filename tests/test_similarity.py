@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from toys import HandSet
 
-from pin_match.evaluation.similarity import similarity, similarity_tables, write_similarity
+from pin_match.evaluation.core.similarity import similarity, similarity_tables, write_similarity
 
 # val objects of the tiny frame-set; lengths differ on purpose (cosine must normalise)
 EMBEDDINGS = {"mug_c": [1.0, 0.0, 0.0], "mug_d": [3.0, 4.0, 0.0], "ball_b": [0.6, 0.0, 0.8]}

@@ -1,5 +1,5 @@
-"""Figures per band of the objects' pixel area (``evaluation.sizes``): hand-computed on a small table, then the files
-``report`` and ``compare`` write with them."""
+"""Figures per band of the objects' pixel area (``evaluation.core.sizes``): hand-computed on a small table, then the
+files ``report`` and ``compare`` write with them."""
 
 from __future__ import annotations
 
@@ -10,8 +10,8 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import Bootstrap, EvalContext
-from pin_match.evaluation.metrics import detection_metrics
-from pin_match.evaluation.sizes import (
+from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays
+from pin_match.evaluation.core.sizes import (
     ALL,
     BANDS,
     NO_OBJECT,
@@ -22,7 +22,7 @@ from pin_match.evaluation.sizes import (
     readable,
     size_table,
 )
-from pin_match.evaluation.sizes_page import sizes_section
+from pin_match.evaluation.pages.sizes_page import sizes_section
 from pin_match.scoring.table import ScoreTable
 
 # (episode, step): (score, {role: [pixels of each object of that role]}) -- step order within each episode
@@ -86,7 +86,7 @@ def test_size_table_by_hand():
 
 def test_the_all_row_is_the_pooled_metrics():
     scored, vis = scored_and_visibility()
-    pooled = detection_metrics(scored, SIGMA)
+    pooled = detection_metrics(frame_arrays(scored), SIGMA)
     row = size_table(scored, vis, SIGMA).loc[ALL]
     for key in ("auroc_same", "tm_pct", "cm_pct", "target_recall", "first_match_precision"):
         assert row[key] == pytest.approx(pooled[key]), key
@@ -147,7 +147,7 @@ def tiny_table(fs, scores: list[float]) -> ScoreTable:
 
 
 def test_report_writes_sizes_beside_its_metrics(tiny_frameset, tmp_path):
-    from pin_match.evaluation.report import report
+    from pin_match.evaluation.flows.report import report
 
     result = report(tiny_table(tiny_frameset, [0.7, 0.6, 0.2, 0.1]), EvalContext(tiny_frameset, Bootstrap(n_boot=20)),
                     tmp_path, sigma=SIGMA, split="val")
@@ -160,8 +160,8 @@ def test_report_writes_sizes_beside_its_metrics(tiny_frameset, tmp_path):
 
 
 def test_compare_adds_auroc_same_per_band(tiny_frameset, tmp_path):
-    from pin_match.evaluation.compare import AtSigma, compare
-    from pin_match.evaluation.sigma import SigmaChoice
+    from pin_match.evaluation.core.sigma import SigmaChoice
+    from pin_match.evaluation.flows.compare import AtSigma, compare
 
     given = SigmaChoice(SIGMA, "given", "test")
     sides = [AtSigma(tiny_table(tiny_frameset, s), given) for s in ([0.7, 0.6, 0.2, 0.1], [0.4, 0.6, 0.2, 0.1])]

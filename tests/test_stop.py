@@ -10,9 +10,9 @@ import pytest
 from test_navigation import table_of, walk_set  # noqa: F401 (walk_set: a fixture used below)
 from test_policies import scored_episodes
 
-from pin_match.evaluation.metrics import frame_arrays
-from pin_match.evaluation.policies import policy_metrics
-from pin_match.evaluation.stop import (
+from pin_match.evaluation.core.metrics import frame_arrays
+from pin_match.evaluation.core.policies import policy_metrics
+from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     HouseStop,
     PolicyError,
@@ -22,7 +22,7 @@ from pin_match.evaluation.stop import (
     gated_scores,
     house_level,
 )
-from pin_match.evaluation.stop_page import stop_html, stop_table
+from pin_match.evaluation.pages.stop_page import stop_html, stop_table
 
 
 def test_the_house_level_is_the_mean_of_the_highest_earlier_scores_of_the_episode():
@@ -120,7 +120,7 @@ def test_the_walk_stops_where_the_house_relative_policy_fires(walk_set):  # noqa
     """The recorded walk (test_navigation): the look-alike at step 1 clears sigma, so PIN's rule walks to it; the house
     line (the running maximum plus 0.3) keeps it out and stops at step 4, the target 3 m ahead."""
     from pin_match.evaluation import EvalContext
-    from pin_match.evaluation.navigation import episodes_at
+    from pin_match.evaluation.core.navigation import episodes_at
 
     places = EvalContext(walk_set).placements(table_of(walk_set, [0.3, 0.5, 0.2, 0.35, 0.9, 0.95]), "val")
     pin = episodes_at(places, 0.4).iloc[0]

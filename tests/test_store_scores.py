@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import torch
 
-from pin_match.evaluation import evaluator
-from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.core import evaluator
+from pin_match.evaluation.core.labels import frame_labels
 from pin_match.nn.head import ProjectionHead
 from pin_match.training import compare_with_frozen, scored_from_store, store_frame_scores
 

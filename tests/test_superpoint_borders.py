@@ -3,7 +3,7 @@
 The reference detector below is written from magicleap's SuperGluePretrainedNetwork
 ``models/superpoint.py`` (``simple_nms``, ``remove_borders``, ``top_k_keypoints``,
 ``sample_descriptors``, ``SuperPoint.forward``), with torch's functional ops on the tensors of
-the transformers checkpoint, read by name; it shares no code with ``pin_match.matchers.superpoint``.
+the transformers checkpoint, read by name; it shares no code with ``pin_match.matchers.common.superpoint``.
 transformers' SuperPoint (5.23) bounds its border test by 8 x the full-resolution size, so
 keypoints in the bottom and right 4 px survive and push others out of the top-k; the
 frames here are built so that this happens.
@@ -22,7 +22,7 @@ from test_keypoint_matchers import reference_superglue
 from tiny_weights import save_tiny_superglue_peaky
 
 from pin_match.contract import Target, create_matcher
-from pin_match.matchers.references import prepare_references
+from pin_match.matchers.common.references import prepare_references
 
 BORDER = 4
 
@@ -114,7 +114,7 @@ def in_band(xy: torch.Tensor, height: int, width: int) -> torch.Tensor:
 @torch.inference_mode()
 def test_detect_keeps_exactly_magicleaps_keypoints_where_transformers_keeps_the_border(border_model, seed,
                                                                                       max_keypoints):
-    from pin_match.matchers.superpoint import detect
+    from pin_match.matchers.common.superpoint import detect
 
     gray = noise_frame(seed)
     h, w = gray.shape
@@ -140,7 +140,7 @@ def test_a_transformers_with_the_bound_fixed_changes_nothing(border_model, monke
     """If transformers passes the full-resolution size (the fix), it equals magicleap alone and detect is unchanged."""
     from transformers.models.superpoint import modeling_superpoint
 
-    from pin_match.matchers.superpoint import detect
+    from pin_match.matchers.common.superpoint import detect
 
     gray = noise_frame(0)
     before = detect(border_model.keypoint_detector, [gray], "cpu", 64)[0]

@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from pin_match.evaluation.metrics import COUNT_KEYS, METRIC_KEYS, detection_metrics
-from pin_match.evaluation.sweep import sweep, sweep_loop
+from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, detection_metrics, frame_arrays
+from pin_match.evaluation.core.sweep import sweep, sweep_loop
 
 
 def random_scored(seed: int, n: int = 500, episodes: int = 40, levels: int | None = None,
@@ -31,16 +31,17 @@ def random_scored(seed: int, n: int = 500, episodes: int = 40, levels: int | Non
                                                       (3, 2, False), (4, None, True)])
 def test_sweep_equals_loop_exactly(seed, levels, seen_unknown):
     df = random_scored(seed, levels=levels, seen_unknown=seen_unknown)
-    fast, slow = sweep(df), sweep_loop(df)
+    fast, slow = sweep(frame_arrays(df)), sweep_loop(frame_arrays(df))
     assert len(fast) == df.score.nunique()
     pd.testing.assert_frame_equal(fast, slow, check_exact=True, check_dtype=False)
 
 
 def test_sweep_matches_detection_metrics_at_sampled_sigmas():
     df = random_scored(5, levels=25)
-    table = sweep(df).set_index("sigma")
+    arr = frame_arrays(df)
+    table = sweep(arr).set_index("sigma")
     for sigma in table.index[::5]:
-        m = detection_metrics(df, sigma)
+        m = detection_metrics(arr, sigma)
         for key in (*COUNT_KEYS, *METRIC_KEYS):
             expected = table.loc[sigma, key]
             assert (m[key] is None) == np.isnan(expected), key
@@ -55,12 +56,12 @@ def test_first_match_when_a_later_record_is_the_target():
     df = pd.DataFrame(dict(frame_id=list("pqrs"), episode_id="E", step=[0, 1, 2, 3], target_category="mug",
                            target_visible=[False, False, True, True], same_visible=False,
                            other_visible=[True, False, False, False], target_seen=0.0, score=[.5, .3, .9, .7]))
-    table = sweep(df).set_index("sigma")
+    table = sweep(frame_arrays(df)).set_index("sigma")
     assert list(table.n_first_tm) == [0, 0, 1, 1]  # sigma .3 .5 .7 .9
     assert list(table.match_pct) == [100.0] * 4
     assert list(table.tm_pct) == [50.0, pytest.approx(200 / 3), 100.0, 100.0]
 
 
 def test_sweep_of_nothing_is_empty():
-    df = random_scored(0).iloc[:0]
-    assert sweep(df).empty and sweep_loop(df).empty
+    arr = frame_arrays(random_scored(0).iloc[:0])
+    assert sweep(arr).empty and sweep_loop(arr).empty

@@ -304,8 +304,8 @@ def test_every_episode_stops_with_its_target_large_and_passes_a_lookalike(synth)
 @pytest.mark.slow
 def test_default_set_targets_large_and_alike_in_both_splits(default_synth):
     """The default set: every episode shows its target at 2,000 px in 3 frames; the splits' medians within 2x."""
-    from pin_match.evaluation.frameset_page import LARGE_PX, target_sizes
-    from pin_match.evaluation.labels import frame_labels
+    from pin_match.evaluation.core.labels import frame_labels
+    from pin_match.evaluation.pages.frameset_page import LARGE_PX, target_sizes
 
     sizes = target_sizes(frame_labels(default_synth))
     assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}

@@ -22,7 +22,7 @@ from pin_match.cli import main
 from pin_match.contract.testing import contract_target
 from pin_match.contract.weights import WeightsError
 from pin_match.data.writer import FrameSetWriter
-from pin_match.matchers.patch import alpha_to_grid
+from pin_match.matchers.common.patch import alpha_to_grid
 from pin_match.nn.head import ProjectionHead, load_head
 from pin_match.scoring import RunOptions, score
 from pin_match.training import Backbone, TrainConfig, TrainingError, store_frame_scores, train

@@ -10,11 +10,11 @@ import pandas as pd
 import pytest
 
 from pin_match.evaluation import Bootstrap, EvalContext, EvaluationError
-from pin_match.evaluation.labels import LabelError, frame_labels, localisation_hits, scored_frames
-from pin_match.evaluation.report import report
-from pin_match.evaluation.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
-from pin_match.evaluation.tables import Row, latex_table, markdown_table, report_row, side_by_side, tuning_row
-from pin_match.evaluation.tuning import OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.evaluation.core.labels import LabelError, frame_labels, localisation_hits, scored_frames
+from pin_match.evaluation.core.sigma import PAPER_THRESHOLDS, SigmaError, load_threshold, resolve_sigma
+from pin_match.evaluation.core.tables import Row, latex_table, markdown_table, report_row, side_by_side, tuning_row
+from pin_match.evaluation.core.tuning import OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.evaluation.flows.report import report
 from pin_match.scoring.table import ScoreTable
 
 ON_TARGET = (148.0, 348.0)  # centre of the disc painted at (100, 300) with radius ~38 px
@@ -223,8 +223,8 @@ def _count_calls(monkeypatch, function) -> list:
 
 def test_bench_builds_labels_once_and_arrays_once_per_split(tiny_frameset, tmp_path, monkeypatch):
     """Two matchers, tuned on train and reported on val: one label table, one FrameArrays per matcher and split."""
-    from pin_match.evaluation.bench import bench  # imported before the wrappers go in
-    from pin_match.evaluation.metrics import frame_arrays
+    from pin_match.evaluation.core.metrics import frame_arrays
+    from pin_match.evaluation.flows.bench import bench  # imported before the wrappers go in
     from pin_match.scoring import RunOptions
 
     labels = _count_calls(monkeypatch, frame_labels)
@@ -251,9 +251,9 @@ def test_a_shared_context_gives_the_numbers_of_a_fresh_one(tiny_frameset, tmp_pa
 
 def test_bench_passes_its_tuned_choice_in_memory_and_a_default_run_leaves_no_stale_thresholds(tiny_frameset, tmp_path,
                                                                                             monkeypatch):
-    from pin_match.evaluation import bench as bench_module
-    from pin_match.evaluation.analysis import load_bench
-    from pin_match.evaluation.bench import bench
+    from pin_match.evaluation.core.analysis import load_bench
+    from pin_match.evaluation.flows import bench as bench_module
+    from pin_match.evaluation.flows.bench import bench
     from pin_match.scoring import RunOptions
 
     ctx, run = EvalContext(tiny_frameset, Bootstrap(n_boot=10)), RunOptions(workers=1, progress=False)

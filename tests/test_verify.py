@@ -12,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from pin_match.contract import ConfigError, Crop, Frames, WeightsError, check_matcher, create_matcher
-from pin_match.evaluation.labels import frame_labels
+from pin_match.evaluation.core.labels import frame_labels
 from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import (
     candidate_classes,
@@ -25,7 +25,7 @@ from pin_match.fitting.verifier import (
     target_share,
 )
 from pin_match.fitting.verifier_report import candidate_lines, candidate_recall, signal_sets
-from pin_match.matchers.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
+from pin_match.matchers.common.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
 from pin_match.matchers.verify import (
     DEFAULT_COLOR_GATE,
     DEFAULT_SIGNALS,

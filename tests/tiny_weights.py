@@ -142,7 +142,7 @@ def save_tiny_sam(path: Path) -> str:
 
 def save_tiny_head(path: Path, backbone: str, backbone_cfg: dict, hidden: int = 8) -> str:
     """A random (not identity) projection head for the tiny backbone, in the folder layout pin-match train writes."""
-    from pin_match.matchers.patch import patch_matcher
+    from pin_match.matchers.common.patch import patch_matcher
     from pin_match.nn.head import HEAD_FORMAT, HEAD_VERSION, ProjectionHead, save_head
 
     base = patch_matcher(backbone, **backbone_cfg)

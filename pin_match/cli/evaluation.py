@@ -29,8 +29,8 @@ from pin_match.scoring.table import ScoreTable
 
 if TYPE_CHECKING:
     from pin_match.contract.matcher import Matcher
-    from pin_match.evaluation.carry import ScoredSet
-    from pin_match.evaluation.stop import StopPolicy
+    from pin_match.evaluation.core.stop import StopPolicy
+    from pin_match.evaluation.flows.carry import ScoredSet
 
 WORKERS_HELP = ("worker processes/threads (default: up to 2 for scoring, all cores for rendering); with "
                 "--scheduler local, the Dask worker processes that score")
@@ -55,14 +55,14 @@ def _table(a: argparse.Namespace, fs: FrameSet) -> ScoreTable:
 
 
 def _cmd_tune(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.tuning import default_threshold_path, tune, write_thresholds
+    from pin_match.evaluation.core.tuning import default_threshold_path, tune, write_thresholds
 
     fs = FrameSet.load(a.frameset)
     table = _table(a, fs)
     if a.policy is None:
         result = tune(table, fs, objective=a.objective, split=a.split)
     else:
-        from pin_match.evaluation.policies import StopPolicy, tune_policy
+        from pin_match.evaluation.core.policies import StopPolicy, tune_policy
 
         result = tune_policy(table, fs, StopPolicy.parse(a.policy), objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
@@ -72,9 +72,9 @@ def _cmd_tune(a: argparse.Namespace) -> None:
 
 
 def _cmd_report(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.evaluator import EvalContext
-    from pin_match.evaluation.metrics import Bootstrap
-    from pin_match.evaluation.report import report
+    from pin_match.evaluation.core.evaluator import EvalContext
+    from pin_match.evaluation.core.metrics import Bootstrap
+    from pin_match.evaluation.flows.report import report
 
     fs = FrameSet.load(a.frameset)
     table = _table(a, fs)
@@ -93,7 +93,7 @@ def _fmt(value: float | None) -> str:
 
 def _cmd_similarity(a: argparse.Namespace) -> None:
     from pin_match.contract.registry import create_matcher
-    from pin_match.evaluation.similarity import similarity, write_similarity
+    from pin_match.evaluation.core.similarity import similarity, write_similarity
 
     fs = FrameSet.load(a.frameset)
     matcher = create_matcher(a.matcher, **matcher_overrides(a))
@@ -105,10 +105,10 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 
 def _cmd_bench(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.bench import bench
-    from pin_match.evaluation.compare import compare_bench
-    from pin_match.evaluation.index_page import SetResults, write_index
-    from pin_match.evaluation.tables import markdown_table
+    from pin_match.evaluation.core.tables import markdown_table
+    from pin_match.evaluation.flows.bench import bench
+    from pin_match.evaluation.flows.compare import compare_bench
+    from pin_match.evaluation.flows.index_page import SetResults, write_index
 
     overrides = bench_overrides(a.cfg, a.matcher)
     with engine_run(a) as run:
@@ -123,9 +123,9 @@ def _cmd_bench(a: argparse.Namespace) -> None:
 def _cmd_demo(a: argparse.Namespace) -> None:
     from dataclasses import replace
 
-    from pin_match.evaluation.bench import Stopwatch
-    from pin_match.evaluation.demo import DEMO_SETS, LOOKALIKES, SCANNED, demo
-    from pin_match.evaluation.tables import markdown_table
+    from pin_match.evaluation.core.tables import markdown_table
+    from pin_match.evaluation.flows.bench import Stopwatch
+    from pin_match.evaluation.flows.demo import DEMO_SETS, LOOKALIKES, SCANNED, demo
 
     picked = {SCANNED.name: a.matcher, LOOKALIKES.name: a.lookalike_matcher}
     sets = [replace(s, matchers=tuple(picked[s.name] or s.matchers)) for s in DEMO_SETS
@@ -144,9 +144,9 @@ def _cmd_demo(a: argparse.Namespace) -> None:
 def _cmd_carry(a: argparse.Namespace) -> None:
     from pin_match import atomic
     from pin_match.contract.registry import create_matcher
-    from pin_match.evaluation.carry import ScoredSet
-    from pin_match.evaluation.evaluator import EvalContext
-    from pin_match.evaluation.metrics import Bootstrap
+    from pin_match.evaluation.core.evaluator import EvalContext
+    from pin_match.evaluation.core.metrics import Bootstrap
+    from pin_match.evaluation.flows.carry import ScoredSet
     from pin_match.scoring import score_many
 
     if len(a.framesets) < 2:
@@ -182,8 +182,8 @@ def _carry_report(a: argparse.Namespace, configs: dict[str, Matcher], scored: di
     return what ``--json`` writes."""
     import pandas as pd
 
-    from pin_match.evaluation.carry import chosen_and_carried, headline, leave_one_out
-    from pin_match.evaluation.metrics import Bootstrap
+    from pin_match.evaluation.core.metrics import Bootstrap
+    from pin_match.evaluation.flows.carry import chosen_and_carried, headline, leave_one_out
 
     boot = Bootstrap(n_boot=a.bootstrap)
     walks = any(s.placements is not None for sets in scored.values() for s in sets.values())
@@ -210,7 +210,7 @@ def _carry_report(a: argparse.Namespace, configs: dict[str, Matcher], scored: di
 
 def _policies(a: argparse.Namespace) -> list[StopPolicy]:
     """The stop policies of ``--policy`` (each value a comma-separated list; default PIN's rule), in order."""
-    from pin_match.evaluation.stop import FIRST_MATCH, StopPolicy
+    from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
 
     texts = [t.strip() for value in a.policy or [] for t in value.split(",") if t.strip()]
     policies = list(dict.fromkeys(StopPolicy.parse(t) for t in texts)) or [FIRST_MATCH]
@@ -254,7 +254,7 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
 
 def _objective_argument(s: argparse.ArgumentParser) -> None:
-    from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
+    from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE, OBJECTIVES
 
     s.add_argument("--objective", default=DEFAULT_OBJECTIVE, choices=sorted(OBJECTIVES),
                    help=f"what the chosen sigma maximises (default {DEFAULT_OBJECTIVE}; see docs/metrics.md)")
@@ -344,7 +344,7 @@ def _add_carry(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_demo(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.demo import DEMO_OUT, LOOKALIKES, SCANNED
+    from pin_match.evaluation.flows.demo import DEMO_OUT, LOOKALIKES, SCANNED
 
     scanned, real = SCANNED, LOOKALIKES
     s = sub.add_parser("demo", help="the whole job on scanned look-alikes rendered along PIN walks and on real "

@@ -16,7 +16,7 @@ class CompareUsageError(PinMatchError, ValueError):
 
 
 def _cmd_inspect(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.frameset_page import write_frameset_page
+    from pin_match.evaluation.pages.frameset_page import write_frameset_page
 
     fs = FrameSet.load(a.frameset)
     out = a.out or outputs.RUNS / "inspect" / fs.fingerprint
@@ -24,11 +24,11 @@ def _cmd_inspect(a: argparse.Namespace) -> None:
 
 
 def _cmd_compare(a: argparse.Namespace) -> None:
-    from pin_match.evaluation.compare import AtSigma, compare
-    from pin_match.evaluation.evaluator import EvalContext
-    from pin_match.evaluation.metrics import Bootstrap
-    from pin_match.evaluation.sigma import resolve_sigma
-    from pin_match.evaluation.tables import markdown_table
+    from pin_match.evaluation.core.evaluator import EvalContext
+    from pin_match.evaluation.core.metrics import Bootstrap
+    from pin_match.evaluation.core.sigma import resolve_sigma
+    from pin_match.evaluation.core.tables import markdown_table
+    from pin_match.evaluation.flows.compare import AtSigma, compare
     from pin_match.scoring.cache import find_score_table
     from pin_match.scoring.table import ScoreTable
 

@@ -41,7 +41,7 @@ def _cmd_train(a: argparse.Namespace) -> None:
 
 
 def add_commands(sub: argparse._SubParsersAction) -> None:
-    from pin_match.evaluation.tuning import OBJECTIVES
+    from pin_match.evaluation.core.tuning import OBJECTIVES
     from pin_match.outputs import FEATURES
     from pin_match.training.config import TrainConfig
 

@@ -1,14 +1,16 @@
 """Evaluation: score tables and frame-sets in, PIN metrics, tuned sigmas, reports and tables out; no model.
 
-``labels`` classifies frames from ground truth, ``metrics`` and ``sweep`` are pure
-functions of scored frames, ``sigma`` and ``tuning`` choose the threshold, ``evaluator``,
-``report``, ``tables`` and ``plots`` present it; ``bench`` runs the whole chain for several
-matchers and ``demo`` for each demo set; ``similarity`` is the paper's intra/inter-category
-analysis. ``EvalContext`` (a frame-set, its labels built once, the bootstrap options) is what a
-run passes down where a single call takes a frame-set.
+Three rooms, in the order a run reads them. ``core``: ``labels`` classifies frames from ground
+truth, ``metrics`` and ``sweep`` are pure functions of scored frames, ``sigma`` and ``tuning``
+choose the threshold, ``evaluator`` and ``tables`` state it, ``similarity`` is the paper's
+intra/inter-category analysis. ``pages``: the plots, pictures and HTML pages that show it.
+``flows``: ``report`` writes one matcher's folder, ``bench`` runs the whole chain for several
+matchers and ``demo`` for each demo set. ``EvalContext`` (a frame-set, its labels built once,
+each scored split's arrays converted once, the bootstrap options) is what a run passes down
+where a single call takes a frame-set.
 """
 
-from pin_match.evaluation.evaluator import (
+from pin_match.evaluation.core.evaluator import (
     EvalContext,
     EvaluationError,
     check_frameset,
@@ -16,11 +18,11 @@ from pin_match.evaluation.evaluator import (
     split_frames,
     table_subset,
 )
-from pin_match.evaluation.metrics import Bootstrap
-from pin_match.evaluation.report import report
-from pin_match.evaluation.sigma import SigmaChoice, SigmaError, load_threshold, resolve_sigma
-from pin_match.evaluation.sweep import sweep
-from pin_match.evaluation.tuning import DEFAULT_OBJECTIVE, OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.evaluation.core.metrics import Bootstrap
+from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, load_threshold, resolve_sigma
+from pin_match.evaluation.core.sweep import sweep
+from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE, OBJECTIVES, TuningError, tune, write_thresholds
+from pin_match.evaluation.flows.report import report
 
 __all__ = ["DEFAULT_OBJECTIVE", "OBJECTIVES", "Bootstrap", "EvalContext", "EvaluationError", "SigmaChoice",
            "SigmaError", "TuningError",

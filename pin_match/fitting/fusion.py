@@ -21,8 +21,8 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.labels import TM, class_weights, frame_classes, scored_frames
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.labels import TM, class_weights, frame_classes, scored_frames
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match.scoring import DEFAULT_RUN, RunOptions, score_many

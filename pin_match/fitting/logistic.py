@@ -1,6 +1,6 @@
 """The weighted, L2-penalised logistic regression every fit here solves, and the error a fit raises.
 
-Both fits weigh their rows by ``pin_match.evaluation.labels.class_weights`` (target, same-category
+Both fits weigh their rows by ``pin_match.evaluation.core.labels.class_weights`` (target, same-category
 look-alike and other rows alike); ``require_classes`` refuses a split that lacks a side.
 """
 

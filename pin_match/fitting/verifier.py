@@ -30,9 +30,9 @@ from pin_match import atomic, outputs
 from pin_match.contract.frames import Frames
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.carry import pooled
-from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.labels import TM, UNUSED, class_weights, frame_classes
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.labels import TM, UNUSED, class_weights, frame_classes
+from pin_match.evaluation.flows.carry import pooled
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
 from pin_match.matchers.verify import (
     DEFAULT_SIGNALS,

@@ -23,13 +23,13 @@ import pandas as pd
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.carry import carried, pooled
-from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.intervals import instance_clusters
-from pin_match.evaluation.labels import scored_frames
-from pin_match.evaluation.metrics import DEFAULT_BOOT, Bootstrap
-from pin_match.evaluation.paired import paired_comparison
-from pin_match.evaluation.tuning import sigma_for
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.intervals import instance_clusters
+from pin_match.evaluation.core.labels import scored_frames
+from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap
+from pin_match.evaluation.core.paired import paired_comparison
+from pin_match.evaluation.core.tuning import sigma_for
+from pin_match.evaluation.flows.carry import carried, pooled
 from pin_match.fitting.logistic import FitError
 from pin_match.fitting.verifier import candidate_table, fit_spec, frame_scores
 from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, VerifyMatcher, verdict
@@ -158,7 +158,7 @@ def candidates_figure(fs: FrameSet, labels: pd.DataFrame, table: pd.DataFrame, s
     import cv2
     import matplotlib.pyplot as plt
 
-    from pin_match.evaluation.gallery import draw_frame, on_checkerboard, thumbnail
+    from pin_match.evaluation.pages.gallery import draw_frame, on_checkerboard, thumbnail
 
     frames = scored(labels, frame_scores(table, spec), "verify")
     same = frames[frames.same_visible & ~frames.target_visible].nlargest(per_row, "score")

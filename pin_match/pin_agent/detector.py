@@ -28,7 +28,7 @@ from pin_match import atomic
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Matcher, MatchResult, Modality, Target
 from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
+from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
 
 
 class PinAgentError(PinMatchError, ValueError):

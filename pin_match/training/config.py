@@ -50,7 +50,7 @@ class TrainConfig:
     seed: int = _flag(0, "seed of the head and the batch order")
     threads: int = _flag(2, "torch CPU threads, fixed so results do not depend on the machine's core count")
     objective: str = _flag("first-match", "how sigma is chosen on the held-out objects "
-                                          "(pin_match.evaluation.tuning)")
+                                          "(pin_match.evaluation.core.tuning)")
 
     def __post_init__(self) -> None:
         if not 0.0 < self.holdout < 1.0:

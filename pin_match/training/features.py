@@ -30,7 +30,7 @@ from pin_match import atomic, outputs
 from pin_match.contract.matcher import N_VIEWS, Matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.matchers.patch import alpha_to_grid, patch_matcher
+from pin_match.matchers.common.patch import alpha_to_grid, patch_matcher
 from pin_match.scoring.api import run_jobs
 from pin_match.scoring.cache import cache_dir, read_meta, table_name
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions

@@ -35,8 +35,8 @@ import torch
 
 from pin_match import atomic, outputs
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.tuning import sigma_for
-from pin_match.matchers.patch import patch_matcher
+from pin_match.evaluation.core.tuning import sigma_for
+from pin_match.matchers.common.patch import patch_matcher
 from pin_match.nn.head import CONFIG_FILE, STATE_FILE, ProjectionHead, read_head_config
 from pin_match.scoring.options import RunOptions
 from pin_match.training.checkpoint import Trainable, TrainRun, load_state, save_state, write_head

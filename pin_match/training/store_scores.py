@@ -11,8 +11,8 @@ import pandas as pd
 import torch
 
 from pin_match.data.frameset import FrameSet
-from pin_match.evaluation.evaluator import EvalContext
-from pin_match.evaluation.metrics import auroc
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.metrics import auroc
 from pin_match.nn.head import prototypes
 from pin_match.nn.prototypes import patch_scores
 from pin_match.training.config import TrainingError
@@ -113,7 +113,7 @@ def scored_from_store(data: FrameSet | EvalContext, store: FeatureStore, head: t
 
 def sigma_on_split(scored: pd.DataFrame, objective: str = "first-match", split: str = "train") -> float:
     """Sigma chosen on one split of scored frames, as ``pin-match tune`` chooses it."""
-    from pin_match.evaluation.tuning import sigma_for
+    from pin_match.evaluation.core.tuning import sigma_for
 
     part = scored[scored.split == split]
     if part.empty:
@@ -129,7 +129,7 @@ def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module
     metrics at its sigma (AUROC target vs same-category is ``auroc_same``) and the
     per-category table.
     """
-    from pin_match.evaluation.metrics import detection_metrics, per_category
+    from pin_match.evaluation.core.metrics import detection_metrics, frame_arrays, per_category
 
     ctx = EvalContext(fs)  # the labels once for both matchers
     out: dict[str, dict] = {}
@@ -138,6 +138,7 @@ def compare_with_frozen(fs: FrameSet, store: FeatureStore, head: torch.nn.Module
         scored = scored[scored.split == split].reset_index(drop=True)
         if scored.empty:
             raise TrainingError(f"feature store {store.root} holds no frame of split {split!r}")
-        out[name] = dict(scored=scored, sigma=sigmas[name], metrics=detection_metrics(scored, sigmas[name]),
-                         per_category=per_category(scored, sigmas[name]))
+        arr = frame_arrays(scored)  # once for both tables
+        out[name] = dict(scored=scored, sigma=sigmas[name], metrics=detection_metrics(arr, sigmas[name]),
+                         per_category=per_category(arr, sigmas[name]))
     return out

@@ -1,0 +1,242 @@
+"""What a matcher costs the agent: PIN's navigation metrics (SR, SPL, CE, D2G, Steps) estimated from recorded walks.
+
+PIN judges a detection module by what its agent then does, and detection metrics can disagree
+with it (the paper's DINO: the lowest CM, yet SR 4.02). Without a simulator, the walk a frame-set
+recorded stands in for the agent's exploration: it is followed unchanged until the stop policy
+fires on a frame whose matched points can be placed in the house (depth in PIN's sensor range);
+the matched points are back-projected with the frame's depth, pose and camera, and the agent walks
+straight to their median, where it stops. Success: that point within PIN's success distance of
+the target; category error: within it of a same-category look-alike instead; D2G: its distance
+to the target; Steps: the actions walked to the stop frame, the turns and forward steps to the
+point, and the stop; SPL: success x geodesic / max(path, geodesic). A walk on which the policy
+never fires on a placeable frame is "not found": a failure, D2G from the walk's last pose, Steps
+the walk's. Assumptions and the paper's definitions: docs/metrics.md, "Navigation".
+
+Pure functions of a score table, its frame-set (geometry, depth, masks) and a stop policy;
+``Placements`` reads each frame's depth at its points once and serves every sigma.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+
+from pin_match.data.frameset import FrameSet
+from pin_match.data.geometry import EpisodeGeometry, Geometry
+from pin_match.errors import PinMatchError
+from pin_match.evaluation.core.intervals import Clusters, episode_weights, percentile_interval, unit_codes
+from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, found_frames
+
+SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
+FORWARD_STEP = 0.25  # metres per forward action
+TURN = math.radians(30.0)  # one turn action
+DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: outside it a pixel has no depth
+
+OUTCOMES = ("success", "category error", "other stop", "not found")
+NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
+SHARE_KEYS = ("not_found_pct", "unplaced_pct")
+EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
+                   "landed_on", "point_x", "point_y", "point_z", "d2g", "path", "geodesic", "spl", "steps",
+                   "unplaced_firings"]
+
+
+class NavigationError(PinMatchError, ValueError):
+    """A frame-set or score table on which the navigation estimate cannot be made."""
+
+
+@dataclass(frozen=True)
+class FramePoints:
+    """One frame's stored points with what placing them needs: their scores, house-frame positions (NaN where the
+    depth is outside PIN's range) and what each landed on in the instance mask."""
+
+    scores: np.ndarray  # (K,)
+    xyz: np.ndarray  # (K, 3)
+    roles: np.ndarray  # (K,) object role at the point's pixel, "background" where none
+
+
+class Placements:
+    """A scored split's frames in walk order, with each frame's points placed in the house on first use.
+
+    Built once per (table, split) and asked at any sigma, so a sweep reads each frame's depth once.
+    """
+
+    def __init__(self, fs: FrameSet, scored: pd.DataFrame, arr: FrameArrays, table_frames: pd.DataFrame) -> None:
+        reason = fs.navigation_missing
+        if reason is not None:
+            raise NavigationError(f"no navigation estimate on {fs.root}: {reason}")
+        self.fs = fs
+        self.geometry: Geometry = fs.geometry  # type: ignore[assignment]  # present: navigation_missing is None
+        codes = pd.factorize(scored["episode_id"], sort=False)[0]
+        order = np.lexsort((scored["step"].to_numpy(), codes))  # the order of ``metrics.frame_arrays``
+        self.frame_ids = scored["frame_id"].to_numpy()[order]
+        self.steps = scored["step"].to_numpy(np.int64)[order]
+        self.arrays = arr  # the same frames in the same order: the stop policy reads its scores
+        self.rows = table_frames.set_index("frame_id")
+        poses = self.geometry.poses.loc[self.frame_ids]
+        self.xy = poses[["pose_x", "pose_y"]].to_numpy(np.float64)
+        self.yaw = poses["pose_yaw"].to_numpy(np.float64)
+        moved = np.r_[0.0, np.hypot(*np.diff(self.xy, axis=0).T)]
+        moved[np.r_[True, np.diff(arr.episode) != 0]] = 0.0
+        self.walked = _cumsum_by_episode(moved, arr.episode)  # metres walked up to each frame
+        self._points: dict[str, FramePoints] = {}
+        self._roles = _role_values(fs)
+
+    def points(self, frame_id: str) -> FramePoints:
+        if frame_id not in self._points:
+            row = self.rows.loc[frame_id]
+            xy = np.stack([np.asarray(row["points_x"], np.float64), np.asarray(row["points_y"], np.float64)], 1)
+            depth, mask = self.fs.depth(frame_id), self.fs.instance_mask(frame_id)
+            px = np.clip(np.floor(xy[:, 0]).astype(np.int64), 0, depth.shape[1] - 1)
+            py = np.clip(np.floor(xy[:, 1]).astype(np.int64), 0, depth.shape[0] - 1)
+            d = depth[py, px].astype(np.float64)
+            xyz = self.geometry.back_project(frame_id, xy, d)
+            xyz[(d < DEPTH_RANGE[0]) | (d > DEPTH_RANGE[1])] = np.nan
+            roles = self._roles.get(frame_id, {})
+            self._points[frame_id] = FramePoints(np.asarray(row["point_scores"], np.float64), xyz,
+                                                 np.array([roles.get(int(v), "background") for v in mask[py, px]],
+                                                          dtype=object))
+        return self._points[frame_id]
+
+    def place(self, frame_id: str, sigma: float) -> tuple[np.ndarray, str] | None:
+        """Where the agent would walk from this matched frame: the median of its placeable points at sigma, and
+        what the point nearest it landed on; None when no point above sigma has depth in PIN's range."""
+        p = self.points(frame_id)
+        keep = (p.scores >= sigma) & ~np.isnan(p.xyz[:, 0])
+        if not keep.any():
+            return None
+        xyz = p.xyz[keep]
+        goal = np.median(xyz, axis=0)
+        return goal, str(p.roles[keep][int(np.argmin(np.linalg.norm(xyz - goal, axis=1)))])
+
+
+def _cumsum_by_episode(values: np.ndarray, episode: np.ndarray) -> np.ndarray:
+    total = np.cumsum(values)
+    starts = np.flatnonzero(np.r_[True, np.diff(episode) != 0]) if len(values) else np.zeros(0, np.int64)
+    before = np.r_[0.0, total][starts]
+    return total - np.repeat(before, np.diff(np.r_[starts, len(values)]))
+
+
+def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
+    vis = fs.visibility
+    out: dict[str, dict[int, str]] = {}
+    for frame_id, value, role in zip(vis.frame_id, vis.mask_value, vis.role):
+        out.setdefault(frame_id, {})[int(value)] = role
+    return out
+
+
+def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
+    """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts."""
+    arr = places.arrays
+    fired, line = found_frames(arr, sigma, policy), policy.line(arr, sigma)  # line: sigma, or the policy's per frame
+    matched = arr.score >= line
+    rows = []
+    starts = np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(arr.score) else np.zeros(0, np.int64)
+    for start, end in zip(starts, np.r_[starts[1:], len(arr.score)]):
+        rows.append(_episode(places, line, int(start), int(end), fired, matched))
+    return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
+
+
+def _episode(places: Placements, line: np.ndarray, start: int, end: int, fired: np.ndarray,
+             matched: np.ndarray) -> dict:
+    episode_id = str(places.arrays.episode_ids[places.arrays.episode[start]])
+    geometry = places.geometry.episodes[episode_id]
+    target_id = str(places.fs.episode(episode_id).target_object_id)
+    target = np.asarray(geometry.positions[target_id])
+    unplaced = 0
+    for t in np.flatnonzero(fired[start:end]) + start:
+        seen = np.flatnonzero(matched[start:t + 1])  # the goal comes from the latest matched frame of the window
+        source = start + int(seen[-1]) if seen.size else t
+        placed = places.place(places.frame_ids[source], float(line[source]))
+        if placed is None:
+            unplaced += 1
+            continue
+        return _stop(places, geometry, episode_id, target_id, int(t), int(source), placed) | \
+            {"unplaced_firings": unplaced}
+    last = end - 1
+    position = np.r_[places.xy[last], places.geometry.pose(places.frame_ids[last]).z]
+    return dict(episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None,
+                stop_step=None, point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None,
+                d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]),
+                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]), unplaced_firings=unplaced)
+
+
+def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, t: int, source: int,
+          placed: tuple[np.ndarray, str]) -> dict:
+    point, landed_on = placed
+    target = np.asarray(geometry.positions[target_id])
+    d2g = float(np.linalg.norm(point - target))
+    same = [np.asarray(xyz) for oid, xyz in geometry.positions.items()
+            if oid != target_id and _category(places.fs, oid) == _category(places.fs, target_id)]
+    near_same = any(np.linalg.norm(point - xyz) <= SUCCESS_DISTANCE for xyz in same)
+    outcome = "success" if d2g <= SUCCESS_DISTANCE else "category error" if near_same else "other stop"
+    ahead = point[:2] - places.xy[t]
+    heading = math.atan2(ahead[1], ahead[0])
+    turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
+    distance = float(np.hypot(*ahead))
+    turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
+    steps = int(places.steps[t]) + turns + math.ceil(distance / FORWARD_STEP) + 1
+    path = float(places.walked[t]) + distance
+    geodesic = geometry.geodesic_distance
+    spl = float(outcome == "success") * geodesic / max(path, geodesic) if max(path, geodesic) > 0 else 0.0
+    return dict(episode_id=episode_id, target_object_id=target_id, outcome=outcome,
+                stop_frame_id=str(places.frame_ids[t]), stop_step=int(places.steps[t]),
+                point_frame_id=str(places.frame_ids[source]), landed_on=landed_on, point_x=float(point[0]),
+                point_y=float(point[1]), point_z=float(point[2]), d2g=d2g, path=path, geodesic=geodesic, spl=spl,
+                steps=steps)
+
+
+def _category(fs: FrameSet, object_id: str) -> str:
+    return str(fs.objects.loc[fs.objects.object_id == object_id, "category"].iloc[0])
+
+
+def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
+    """SR, SPL, CE (% of episodes), D2G (metres), Steps, and the shares not found and with an unplaced firing, each
+    episode counted ``weights`` times (None: once)."""
+    w = np.ones(len(episodes)) if weights is None else np.asarray(weights, np.float64)
+    total = w.sum()
+    if not total:
+        return {k: math.nan for k in (*NAVIGATION_KEYS, *SHARE_KEYS)}
+
+    def mean(values) -> float:
+        return float(np.dot(w, np.asarray(values, np.float64)) / total)
+
+    outcome = episodes["outcome"]
+    return dict(sr=100 * mean(outcome == "success"), spl=100 * mean(episodes["spl"]),
+                ce=100 * mean(outcome == "category error"), d2g=mean(episodes["d2g"]), steps=mean(episodes["steps"]),
+                not_found_pct=100 * mean(outcome == "not found"),
+                unplaced_pct=100 * mean(episodes["unplaced_firings"] > 0))
+
+
+def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,
+                       boot: Bootstrap = DEFAULT_BOOT) -> dict:
+    """``metrics_of`` with percentile intervals resampling target instances (``clusters``), as every other metric."""
+    point = metrics_of(episodes)
+    codes = unit_codes(list(episodes["episode_id"]), clusters)
+    drawn = [metrics_of(episodes, w) for w in episode_weights(codes, boot)] if len(episodes) else []
+    ci = {}
+    for key in point:
+        low, high = percentile_interval(np.array([d[key] for d in drawn]), boot.level) if drawn else (math.nan,) * 2
+        ci[key] = None if math.isnan(low) else [low, high]
+    return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(episodes),
+                outcomes={o: int((episodes["outcome"] == o).sum()) for o in OUTCOMES})
+
+
+def navigation_sweep(places: Placements, sigmas: np.ndarray, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
+    """``metrics_of`` at each sigma (ascending): the curve the plots draw and the SR objective reads."""
+    rows = [{"sigma": float(s), **metrics_of(episodes_at(places, float(s), policy))} for s in sigmas]
+    return pd.DataFrame(rows, columns=["sigma", *NAVIGATION_KEYS, *SHARE_KEYS])
+
+
+MAX_SWEEP_SIGMAS = 200  # a navigation curve places each episode's stop anew per sigma: quantiles beyond this many
+
+
+def sweep_sigmas(scores: np.ndarray) -> np.ndarray:
+    """Candidate sigmas for a navigation curve: every distinct score, or ``MAX_SWEEP_SIGMAS`` quantiles of them."""
+    values = np.unique(np.asarray(scores, np.float64))
+    if len(values) > MAX_SWEEP_SIGMAS:
+        values = np.unique(np.quantile(values, np.linspace(0.0, 1.0, MAX_SWEEP_SIGMAS), method="lower"))
+    return values

@@ -1,0 +1,110 @@
+"""PIN's detection metrics under a stop policy, and sigma chosen for one.
+
+PIN's rule stops at the first frame at or above sigma (1-of-1). Agents that confirm over
+several frames stop when ``k`` of the last ``n`` frames of the episode are at or above sigma
+(k-of-n); a house-relative policy also asks the frame to clear the house's own level
+(``stop.HouseStop``). A frame where the policy fires is "found"; the metrics are PIN's, computed on
+found frames instead of matched ones, by the same counting code (``metrics``), so 1-of-1
+equals today's metrics exactly. Definitions: docs/metrics.md, "Stop policies".
+"""
+
+from __future__ import annotations
+
+import datetime as dt
+import math
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+
+from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.metrics import (
+    COUNT_KEYS,
+    METRIC_KEYS,
+    FrameArrays,
+    Scored,
+    as_arrays,
+    threshold_metrics,
+    to_python,
+)
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, found_frames, gated_scores
+from pin_match.evaluation.core.sweep import sweep
+from pin_match.evaluation.core.tuning import (
+    DEFAULT_MATCH_FLOOR,
+    DEFAULT_OBJECTIVE,
+    OBJECTIVES,
+    choose_sigma,
+    objective_curve,
+)
+from pin_match.scoring.table import ScoreTable
+
+MAX_CANDIDATES = 2000  # sigmas tried for a windowed policy (n > 1): every distinct score, or this many quantiles
+
+
+def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
+    """PIN's counts and metrics with "matched" read as "the policy fires", plus frames to the first firing.
+
+    ``frames_to_first_match``: the mean, over episodes where the policy fires, of the 1-based
+    position of the first frame where it does (NaN when it never fires).
+    """
+    arr = as_arrays(scored)
+    found = found_frames(arr, sigma, policy)
+    out = threshold_metrics(fired_arrays(arr, found), 0.5)
+    first = np.flatnonzero(found)
+    if first.size:
+        first = first[np.r_[True, arr.episode[first][1:] != arr.episode[first][:-1]]]
+        starts = np.searchsorted(arr.episode, arr.episode[first])
+        out["frames_to_first_match"] = float(np.mean(first - starts + 1))
+    else:
+        out["frames_to_first_match"] = math.nan
+    return out
+
+
+def fired_arrays(arr: FrameArrays, found: np.ndarray) -> FrameArrays:
+    """``arr`` with each frame's score replaced by 1 where the policy fires and 0 elsewhere: every metric at 0.5 (and
+    every interval, ``intervals.bootstrap_ci``) then reads "matched" as "found"."""
+    return replace(arr, score=found.astype(np.float64))
+
+
+def policy_sweep(scored: Scored, policy: StopPolicy) -> pd.DataFrame:
+    """Every count and threshold metric of ``policy_metrics`` at every distinct score as sigma (ascending): the table
+    ``tuning.choose_sigma`` reads. A 1-of-1 window is one sorted sweep of the gated scores (``stop.gated_scores``),
+    read at every distinct score; a longer window applies each sigma in turn, at most ``MAX_CANDIDATES`` of them."""
+    arr = as_arrays(scored)
+    scores = np.unique(arr.score)
+    if policy.n == 1:
+        gated = replace(arr, score=gated_scores(arr, policy))
+        curve = sweep(gated)
+        never = pd.DataFrame([{"sigma": np.inf, **threshold_metrics(gated, np.inf)}])  # above every gated score
+        rows = pd.concat([curve, never], ignore_index=True).iloc[np.searchsorted(curve["sigma"], scores)]
+        return rows.assign(sigma=scores).reset_index(drop=True)[["sigma", *COUNT_KEYS, *METRIC_KEYS]]
+    if len(scores) > MAX_CANDIDATES:
+        scores = np.unique(np.quantile(scores, np.linspace(0.0, 1.0, MAX_CANDIDATES)))
+    rows = [{"sigma": s, **threshold_metrics(fired_arrays(arr, found_frames(arr, s, policy)), 0.5)} for s in scores]
+    return pd.DataFrame(rows, columns=["sigma", *COUNT_KEYS, *METRIC_KEYS])
+
+
+def policy_sigma(scored: Scored, policy: StopPolicy = FIRST_MATCH, objective: str = DEFAULT_OBJECTIVE,
+                 match_floor: float = DEFAULT_MATCH_FLOOR) -> float:
+    """The sigma ``objective`` chooses for ``policy`` on scored frames (for 1-of-1, ``tuning.sigma_for``'s)."""
+    curve = policy_sweep(scored, policy)
+    return float(curve["sigma"].iloc[choose_sigma(curve, objective, match_floor)[0]])
+
+
+def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: str = DEFAULT_OBJECTIVE,
+                split: str = "train", match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
+    """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics (for a
+    navigation objective, of the navigation estimate under the policy)."""
+    ctx = EvalContext.of(fs)
+    arr = ctx.arrays(table, split)
+    navigation = objective in OBJECTIVES and OBJECTIVES[objective].navigation
+    curve = objective_curve(ctx, table, split, objective, policy) if navigation else policy_sweep(arr, policy)
+    index, value = choose_sigma(curve, objective, match_floor)
+    sigma = float(curve["sigma"].iloc[index])
+    return dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
+                sigma=sigma, policy=str(policy), objective=objective, objective_value=value, split=split,
+                frameset_fingerprint=table.meta.get("frameset_fingerprint"), n_frames=len(arr.score),
+                n_candidates=len(curve),
+                metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(arr, sigma, policy).items()},
+                date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))

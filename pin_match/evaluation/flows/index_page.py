@@ -1,0 +1,169 @@
+"""``index.html`` of a bench or demo folder: per frame-set a plain headline, the paired comparison and pictures,
+then the table, then a link to every report and comparison page.
+
+The headline is the question a PIN agent asks of its detector: in how many episodes was the
+first frame it matched the target (``first_match_success``, with its bootstrap interval)? The
+pictures answer it by eye: per val episode the target's references, then each matcher's first
+frame above its sigma, drawn with the ground-truth outlines and the matcher's points.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from markupsafe import Markup
+
+from pin_match.evaluation.core.analysis import BenchRun
+from pin_match.evaluation.core.layout import BenchLayout
+from pin_match.evaluation.core.navigation import episodes_at
+from pin_match.evaluation.flows.bench import Bench
+from pin_match.evaluation.flows.compare import Comparison
+from pin_match.evaluation.pages import html
+from pin_match.evaluation.pages.gallery import first_matches, frame_roles
+from pin_match.evaluation.pages.pictures import legend, reference_images, scored_frame_image
+
+EPISODES_SHOWN = 6
+PICTURE_SIZE = 200
+INDEX_ASSETS = "index_files"
+
+
+@dataclass(frozen=True)
+class SetResults:
+    """One frame-set's part of the page: what it is, its bench, and its matchers compared with the first."""
+
+    name: str
+    caption: str
+    bench: Bench
+    comparisons: Sequence[Comparison] = ()
+
+
+def first_match_line(result: dict) -> str:
+    """'verify: the target in 14 of 20 episodes (70.0 %, 95 % CI 50.0-85.0 %)' from a report."""
+    m, ci = result["metrics"], result["ci95"].get("first_match_success")
+    share = m.get("first_match_success")
+    interval = f", 95 % CI {ci[0]:.1f}-{ci[1]:.1f} %" if ci else ""
+    pct = "n/a" if share is None else f"{share:.1f} %"
+    return f"{result['matcher']}: the target in {m['n_first_tm']} of {m['n_episodes']} episodes ({pct}{interval})"
+
+
+def headline(results: Sequence[dict]) -> str:
+    """Which matcher's first match was the target in the most val episodes, then the others in that order."""
+    ranked = sorted(results, key=lambda r: (-(r["metrics"].get("first_match_success") or 0.0), r["matcher"]))
+    sources = sorted({r["sigma_source"] for r in ranked})
+    lines = "; ".join(first_match_line(r) for r in ranked)
+    return f"First match is the target (the frame where PIN's agent would stop): {lines}. Sigma: {', '.join(sources)}."
+
+
+def navigation_line(results: Sequence[dict]) -> str | None:
+    """SR and CE of each matcher (the navigation estimate, with intervals), or None without geometry."""
+    if not all("sr" in r["metrics"] for r in results):
+        return None
+
+    def said(r: dict, key: str) -> str:
+        ci = r["ci95"].get(key)
+        return f"{r['metrics'][key]:.1f} %" + (f" ({ci[0]:.1f}-{ci[1]:.1f})" if ci else "")
+
+    parts = [f"{r['matcher']} SR {said(r, 'sr')}, CE {said(r, 'ce')}" for r in results]
+    return ("What the agent would do (estimated from the recorded walks: the stop is the first match placed with "
+            "depth, the agent walks to it; success within 1 m of the target, CE within 1 m of a look-alike): "
+            + "; ".join(parts) + ".")
+
+
+def comparison_lines(c: Comparison) -> list[str]:
+    """The paired differences that decide the ranking, each with its interval, and McNemar's count."""
+    diff = f"{c.names[1]} - {c.names[0]}"
+    a, b = (name.split("@")[0] for name in c.names)  # the ids are on the compare page
+    parts = []
+    for metric in ("FM-prec", "AUROC-same", "AUROC"):
+        row = c.paired.loc[metric]
+        if not np.isfinite(row[diff]):  # FM-prec where one of the two matched no episode
+            parts.append(f"{metric} n/a (one of them matched no episode)")
+            continue
+        scale = "" if metric.startswith("AUROC") else " points"
+        parts.append(f"{metric} {row[diff]:+.3g}{scale} (95 % CI {row['CI low']:+.3g} to {row['CI high']:+.3g})")
+    t = c.test
+    return [f"{b} minus {a}: " + "; ".join(parts) + ".",
+            f"The first match was the target for {a} only in {t['only_a']} episodes, for {b} only in {t['only_b']}, "
+            f"for both in {t['both']} (McNemar p = {t['p_value']:.3g})."]
+
+
+def stop_line(walk) -> str:
+    """Where the agent stopped (the navigation estimate), in a few words."""
+    if walk.outcome == "not found":
+        return f"the agent never stops: {walk.d2g:.1f} m from the target at the walk's end"
+    return f"the agent stops at step {walk.stop_step}: {walk.outcome}, {walk.d2g:.2f} m from the target"
+
+
+def stops(run: BenchRun, matcher: str) -> dict[str, object]:
+    """Each val episode's stop (``navigation.episodes_at``) by episode id; none without the frame-set's geometry."""
+    if run.frameset.navigation_missing is not None:
+        return {}
+    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher])
+    return {w.episode_id: w for w in walks.itertuples()}
+
+
+def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
+    """Per val episode: the target's references, then each matcher's first frame above its sigma, and where the
+    agent would stop (where the frame-set has geometry)."""
+    run = s.bench.run
+    firsts, walks = {}, {m: stops(run, m) for m in run.matchers}
+    for m in run.matchers:
+        first = first_matches(run.scored(m, "val"), run.sigmas[m])
+        firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
+    val = run.frameset.episodes[run.frameset.episodes.split == "val"].sort_values("episode_id").head(episodes)
+    parts = []
+    for _, ep in val.iterrows():
+        target = run.frameset.target(ep.target_object_id)
+        figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
+                                                                  f"target {target.object_id} ({target.category})"])]
+        for m in run.matchers:
+            stop = [stop_line(walks[m][ep.episode_id])] if ep.episode_id in walks[m] else []
+            if ep.episode_id not in firsts[m].index:
+                figures.append(html.figure([], [f"{m}: no frame above sigma {run.sigmas[m]:g}", *stop], "miss"))
+                continue
+            f = firsts[m].loc[ep.episode_id]
+            image = scored_frame_image(assets, run.frameset, run.tables[m], f.frame_id, run.sigmas[m],
+                                       box=PICTURE_SIZE)
+            figures.append(html.figure([image], [f"{m}: first match at step {f.step}", f"shows: {f.role}",
+                                                 f"score {f.score:.3g} (sigma {run.sigmas[m]:g})", *stop],
+                                       "hit" if f.role == "target" else "miss"))
+        parts.append(html.gallery(figures))
+    return parts
+
+
+def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
+    n_val = int((s.bench.run.frameset.episodes.split == "val").sum())
+    shown = min(n_val, EPISODES_SHOWN)
+    parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results))]
+    navigation = navigation_line(s.bench.results)
+    if navigation:
+        parts.append(html.paragraph(navigation))
+    if s.comparisons:
+        parts += [html.heading("Paired comparison", 3),
+                  *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]
+    parts += [html.heading("Each matcher's first match", 3),
+              html.paragraph(f"{shown} of {n_val} val episodes: the target's references, then where each matcher "
+                             "first fired (green border: the target; red: anything else, or nothing).", "note"),
+              *episode_pictures(s, assets),
+              html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
+    return parts
+
+
+def write_index(out: str | Path | BenchLayout, sets: Sequence[SetResults]) -> Path:
+    """Write ``index.html`` (images in ``index_files/``): each set's story, then links to every page under it."""
+    layout = out if isinstance(out, BenchLayout) else BenchLayout(Path(out))
+    root = layout.root
+    assets = html.Assets(layout.index, INDEX_ASSETS)
+    parts: list[Markup] = [legend()]
+    pages = []
+    for s in sets:
+        parts += set_section(s, assets)
+        pages += [s.bench.run.layout.report_page(m) for m in s.bench.run.matchers]
+        pages += [c.folder.page for c in s.comparisons]
+    links = [html.link(html.relative(p, root), html.relative(p.parent, root)) for p in pages]
+    note = f"{len(pages)} pages: a report per matcher and frame-set with its galleries, then the paired comparisons."
+    parts += [html.heading("Reports and comparisons"), html.paragraph(note, "note"), html.bullets(links)]
+    return html.write_page(layout.index, f"pin_match results in {root}", parts)
