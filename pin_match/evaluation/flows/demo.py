@@ -120,7 +120,7 @@ def shipped_sigmas(s: DemoSet, fs: FrameSet) -> Path | None:
     if not s.shipped.exists():
         return None
     shipped = atomic.read_json(s.shipped, DemoError, "shipped demo sigmas")
-    ids = {create_matcher(name).matcher_id for name in s.matchers}
+    ids = {create_matcher(name).id for name in s.matchers}
     if shipped.get("frameset_fingerprint") != fs.fingerprint or not ids <= set(shipped.get("thresholds", {})):
         return None
     return s.shipped
