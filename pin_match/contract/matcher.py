@@ -137,6 +137,7 @@ class MatchResult:
     heatmap: np.ndarray | None = None        # low-resolution score map (per crop: n_crops x h x w)
     boxes: np.ndarray | None = None          # (M, 4) x0, y0, x1, y1 in image pixels
     box_scores: np.ndarray | None = None     # (M,)
+    box_views: np.ndarray | None = None      # (M,) the reference view (index into Target.views) each box matched best
 
     def __post_init__(self) -> None:
         self.points = _point_array(self.points)
@@ -331,6 +332,11 @@ def _extras_problem(r: MatchResult) -> str | None:
         return "returned non-finite crop scores"
     if r.boxes is not None and (r.box_scores is None or len(r.box_scores) != len(np.asarray(r.boxes).reshape(-1, 4))):
         return "returned boxes without one box score each"
+    if r.box_views is not None:
+        views = np.asarray(r.box_views)
+        if r.boxes is None or views.shape != (len(np.asarray(r.boxes).reshape(-1, 4)),) \
+                or views.dtype.kind not in "iu" or (len(views) and (views.min() < 0 or views.max() >= N_VIEWS)):
+            return f"returned box views that are not one view index (0-{N_VIEWS - 1}) per box"
     return None
 
 
@@ -385,10 +391,14 @@ def merge_crop_results(parts: Sequence[MatchResult], boxes: Sequence[Crop]) -> M
     heatmaps = [p.heatmap for p in parts]
     heatmap = np.stack(heatmaps) if all(h is not None for h in heatmaps) and \
         len({h.shape for h in heatmaps}) == 1 else None
-    boxes_out, box_scores = None, None
-    if any(p.boxes is not None for p in parts):
+    boxes_out, box_scores, box_views = None, None, None
+    boxed = [(p, b) for p, b in zip(parts, boxes) if p.boxes is not None]
+    if boxed:
         boxes_out = np.concatenate([p.boxes.reshape(-1, 4) + np.array([b.x0, b.y0, b.x0, b.y0], np.float32)
-                                    for p, b in zip(parts, boxes) if p.boxes is not None])
-        box_scores = np.concatenate([p.box_scores for p in parts if p.boxes is not None])
+                                    for p, b in boxed])
+        box_scores = np.concatenate([p.box_scores for p, _ in boxed])
+        if all(p.box_views is not None for p, _ in boxed):
+            box_views = np.concatenate([p.box_views for p, _ in boxed])
     return MatchResult(score=float(scores.max()), points=points.astype(np.float32), point_scores=point_scores,
-                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores)
+                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores,
+                       box_views=box_views)
