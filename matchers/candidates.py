@@ -117,12 +117,27 @@ def color_histogram(rgb: np.ndarray, weights: np.ndarray, bins: tuple[int, int, 
     Hue is binned finely and value coarsely, so a red and a blue instance differ while a shadow
     moves little; grey pixels (low saturation) still differ by value (white, grey, black).
     """
-    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV).astype(np.int64)
-    nh, ns, nv = bins
-    index = ((hsv[..., 0] * nh // 180) * ns + hsv[..., 1] * ns // 256) * nv + hsv[..., 2] * nv // 256
-    hist = np.bincount(index.ravel(), weights=weights.ravel().astype(np.float64), minlength=nh * ns * nv)
+    index = hsv_bins(rgb, bins)
+    hist = np.bincount(index.ravel(), weights=weights.ravel().astype(np.float64), minlength=int(np.prod(bins)))
     total = hist.sum()
     return hist / total if total > 0 else np.full(len(hist), 1.0 / len(hist))
+
+
+def hsv_bins(rgb: np.ndarray, bins: tuple[int, int, int]) -> np.ndarray:
+    """Each pixel's flat HSV bin (``bins`` = hue, saturation, value counts; OpenCV hue runs 0-179)."""
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV).astype(np.int64)
+    nh, ns, nv = bins
+    return ((hsv[..., 0] * nh // 180) * ns + hsv[..., 1] * ns // 256) * nv + hsv[..., 2] * nv // 256
+
+
+def backprojection(frame: np.ndarray, reference: np.ndarray, bins: tuple[int, int, int]) -> np.ndarray:
+    """Per pixel of ``frame``, how much its colour is the reference's rather than the frame's: r / (1 + r), r the
+    reference histogram ``reference`` over the frame's own at the pixel's bin (``color``'s ratio histogram,
+    Swain & Ballard), in [0, 1): colours common on the target and rare in the frame stand out."""
+    index = hsv_bins(frame, bins)
+    scene = np.bincount(index.ravel(), minlength=len(reference)) / index.size
+    ratio = reference / np.maximum(scene, 1e-12)
+    return (ratio / (1.0 + ratio)).astype(np.float32)[index]
 
 
 def bhattacharyya(p: np.ndarray, q: np.ndarray) -> float:

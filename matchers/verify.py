@@ -38,10 +38,12 @@ with the references'. This matcher does that with the default ``effnet``:
 5. **Point**: each candidate's first point is its most reference-like zoom cell (a box of 200 px
    squashed to ``zoom_size`` has cells of 25 px, a locate cell's size, so the best candidate is
    zoomed once more: a square of ``REFINE_SHARE`` of its box's longer side, at least
-   ``REFINE_MIN_SIDE`` px, around that cell, whose most reference-like cell becomes the frame's
-   first point); then the region's cells by locate score. Every point carries its candidate's
-   score; the boxes come back with the result, each with the reference view its zoomed
-   descriptor matched best (``MatchResult.box_views``). The points and views need the zoom: with
+   ``REFINE_MIN_SIDE`` px, around that cell; there a cell's likeness plus ``REFINE_COLOUR`` x
+   its pixels' mean colour back-projection (``color``'s ratio histogram of the references'
+   colours over the frame's) picks the frame's first point); then the region's cells by
+   locate score. Every point carries its candidate's score; the boxes come back with the
+   result, each with the reference view its zoomed descriptor matched best
+   (``MatchResult.box_views``). The points and views need the zoom: with
    none of its signals they are the region's cells and no views.
 """
 
@@ -75,6 +77,7 @@ from pin_match.contract import (
 from pin_match.contract.cohort import sigmoid
 from pin_match.matchers.candidates import (
     Candidate,
+    backprojection,
     bhattacharyya,
     cell_centre,
     color_histogram,
@@ -103,6 +106,7 @@ DEFAULT_COLOR_GATE = 0.8
 # the best candidate's second zoom: measured on the scanned set's val target frames (docs/synthetic.md, by size)
 REFINE_SHARE = 0.4
 REFINE_MIN_SIDE = 64
+REFINE_COLOUR = 0.5  # weight of the colour back-projection beside the likeness (0-1 each) in the second zoom
 # what the signals' values depend on besides the config and the parts; the matcher's version also counts where the
 # points go, which no signal reads: version 2 moved the points, so a verifier file fitted on version 1 still fits
 SIGNALS_VERSION = 1
@@ -371,9 +375,14 @@ class VerifyMatcher(CompositeMatcher):
         feats = self.zoomer.backbone.encode([np.ascontiguousarray(image[y0:y1, x0:x1])
                                              for image, (x0, y0, x1, y1) in zip(images, squares)]).patches
         grid = self.zoomer.backbone.grid
-        return [replace(c, points=np.concatenate([
-            np.array([cell_centre(box, grid, int(self._likeness(f).argmax()))], np.float32), c.points]))
-            for c, box, f in zip(best, squares, feats)]
+        out = []
+        for image, c, (x0, y0, x1, y1), f in zip(images, best, squares, feats):
+            colour = backprojection(image, self.reference.histogram, self.cfg.color_bins)[y0:y1, x0:x1]
+            colour = cv2.resize(colour, (grid, grid), interpolation=cv2.INTER_AREA).reshape(-1)
+            cell = int(np.argmax(self._likeness(f).numpy() + REFINE_COLOUR * colour))
+            first = np.array([cell_centre((x0, y0, x1, y1), grid, cell)], np.float32)
+            out.append(replace(c, points=np.concatenate([first, c.points])))
+        return out
 
     # ------------------------------------------------------------------ decision
     def _match_batch(self, images: list[np.ndarray]) -> list[MatchResult]:

@@ -26,6 +26,7 @@ from pin_match.fitting.verifier import (
 )
 from pin_match.fitting.verifier_report import candidate_lines, candidate_recall, signal_sets
 from pin_match.matchers.candidates import (
+    backprojection,
     bhattacharyya,
     cell_centre,
     color_histogram,
@@ -94,6 +95,17 @@ def test_a_zoom_cell_maps_back_into_its_box_and_a_square_fits_the_frame():
     assert cell_centre((100, 200, 140, 280), 4, 6) == pytest.approx((125.0, 230.0))
     assert square_around((50.0, 50.0), 20, (360, 640)) == (40, 40, 60, 60)
     assert square_around((355.0, 2.0), 20, (360, 640)) == (340, 0, 360, 20)  # shifted in at the corner
+
+
+def test_backprojection_marks_the_references_colour_by_how_rare_it_is_in_the_frame():
+    frame = np.zeros((4, 8, 3), np.uint8)
+    frame[:, :2, 0] = 220   # a quarter red
+    frame[:, 2:, 2] = 220   # the rest blue
+    bins = (16, 4, 4)
+    red = color_histogram(frame[:, :2], np.ones((4, 2)), bins)  # the reference: all red
+    weights = backprojection(frame, red, bins)
+    # red: r = 1 / 0.25 = 4, weight 4 / 5; blue: not in the reference, 0
+    assert weights[:, :2] == pytest.approx(np.full((4, 2), 0.8)) and not weights[:, 2:].any()
 
 
 def test_colour_overlap_tells_red_from_blue_and_follows_the_weights():
