@@ -34,8 +34,17 @@ with the references'. This matcher does that with the default ``effnet``:
    candidate's score never rises as its colour overlap falls, the other signals fixed. Each
    candidate's score is the fitted probability that it is the target, the frame's is its
    best candidate's. A probability means one thing on every frame-set, but its level carries only
-   partly across sets (docs/instance-matchers.md). Points are the candidates' cells,
-   each with its candidate's score, and the boxes come back with the result.
+   partly across sets (docs/instance-matchers.md).
+5. **Point**: each candidate's first point is its most reference-like zoom cell (a box of 200 px
+   squashed to ``zoom_size`` has cells of 25 px, a locate cell's size, so the best candidate is
+   zoomed once more: a square of ``REFINE_SHARE`` of its box's longer side, at least
+   ``REFINE_MIN_SIDE`` px, around that cell; there a cell's likeness plus ``REFINE_COLOUR`` x
+   its pixels' mean colour back-projection (``color``'s ratio histogram of the references'
+   colours over the frame's) picks the frame's first point); then the region's cells by
+   locate score. Every point carries its candidate's score; the boxes come back with the
+   result, each with the reference view its zoomed descriptor matched best
+   (``MatchResult.box_views``). The points and views need the zoom: with
+   none of its signals they are the region's cells and no views.
 """
 
 from __future__ import annotations
@@ -43,7 +52,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 from typing import Any
@@ -67,7 +76,16 @@ from pin_match.contract import (
     weights_field,
 )
 from pin_match.contract.cohort import sigmoid
-from pin_match.matchers.common.candidates import Candidate, bhattacharyya, color_histogram, locate, mask_aspect
+from pin_match.matchers.common.candidates import (
+    Candidate,
+    backprojection,
+    bhattacharyya,
+    cell_centre,
+    color_histogram,
+    locate,
+    mask_aspect,
+    square_around,
+)
 from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
 from pin_match.matchers.common.fitted import FittedFileSpec, read_fitted_file
 from pin_match.matchers.common.patch import PatchSimilarityMatcher, alpha_to_grid
@@ -86,6 +104,13 @@ REFERENCE_PAD = 0.1  # a reference view is cut to its mask's box plus this share
 ZOOM_SIGNALS = ("desc", "cycle", "color")  # the signals that need the candidate embedded again
 # chosen by cross-validation over MyVLM's train instances (docs/instance-matchers.md)
 DEFAULT_COLOR_GATE = 0.8
+# the best candidate's second zoom: measured on the scanned set's val target frames (docs/synthetic.md, by size)
+REFINE_SHARE = 0.4
+REFINE_MIN_SIDE = 64
+REFINE_COLOUR = 0.5  # weight of the colour back-projection beside the likeness (0-1 each) in the second zoom
+# what the signals' values depend on besides the config and the parts; the matcher's version also counts where the
+# points go, which no signal reads: version 2 moved the points, so a verifier file fitted on version 1 still fits
+SIGNALS_VERSION = 1
 
 
 @dataclass
@@ -202,7 +227,7 @@ class VerifyMatcher(CompositeMatcher):
     # PIN's first-match objective on MyVLM pasted's train instances (docs/instance-matchers.md); how far this
     # one sigma carries to other sets is measured there: tune it on frames like the agent's
     default_sigma = 0.658
-    version = 1
+    version = 2  # 2: the first point is the zoomed peak; boxes say which view matched
     paper = ("detect, then re-identify (CNOS, Nguyen et al., ICCVW 2023; NIDS-Net, Lu et al., 2024) with "
              "cycle-consistent cell matches (Matcher, Liu et al., ICLR 2024) and a colour check (PInVerify, 2026)")
 
@@ -230,7 +255,7 @@ class VerifyMatcher(CompositeMatcher):
         config = self.cfg.hashed_dict()
         for decision_only in ("weights", "signals", "color_gate"):
             config.pop(decision_only, None)
-        payload = dict(version=self.version, config=config, parts={r: p.id for r, p in self.parts().items()})
+        payload = dict(version=SIGNALS_VERSION, config=config, parts={r: p.id for r, p in self.parts().items()})
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
     @cached_property
@@ -306,7 +331,11 @@ class VerifyMatcher(CompositeMatcher):
             rows = []
             for i, cand in enumerate(found):
                 others = peaks[:i] + peaks[i + 1:]
-                signals = self._zoom_signals(crops[k], feats[k]) if zoom else {}
+                signals = {}
+                if zoom:
+                    signals, view, cell = self._zoom_signals(crops[k], feats[k])
+                    first = np.array([cell_centre(cand.box, self.zoomer.backbone.grid, cell)], np.float32)
+                    cand = replace(cand, points=np.concatenate([first, cand.points]), view=view)
                 signals.update(proto=cand.peak, margin=cand.peak - max(others) if others else 0.0,
                                keypoints=math.log1p(max(float(matches[k]), 0.0)))
                 rows.append((cand, {s: signals[s] for s in cfg.signals}))
@@ -314,31 +343,66 @@ class VerifyMatcher(CompositeMatcher):
             out.append(rows)
         return out
 
-    def _zoom_signals(self, crop: np.ndarray, cells: torch.Tensor) -> dict[str, float]:
+    def _zoom_signals(self, crop: np.ndarray, cells: torch.Tensor) -> tuple[dict[str, float], int, int]:
+        """The zoomed signals, the view whose descriptor the candidate's is closest to, and its most
+        reference-like cell."""
         ref = self.reference
-        likeness = (F.normalize(cells, dim=-1) @ ref.descriptors.T).amax(1)
+        likeness = self._likeness(cells)
         weight = (likeness - likeness.median()).clamp(min=0)
         if float(weight.sum()) <= 0:
             weight = torch.ones_like(weight)
         descriptor = masked_mean(cells, weight)
-        desc = float((F.normalize(descriptor, dim=0) @ ref.descriptors.T).max())
+        cosines = F.normalize(descriptor, dim=0) @ ref.descriptors.T
         cycle = part_matches(ref.cells, ref.cell_views, cells, "mutual", 1.0)[0]
         grid = self.zoomer.backbone.grid
         pixels = cv2.resize(weight.reshape(grid, grid).numpy().astype(np.float32), (crop.shape[1], crop.shape[0]),
                             interpolation=cv2.INTER_LINEAR)
         color = bhattacharyya(color_histogram(crop, pixels, self.cfg.color_bins), ref.histogram)
-        return {"desc": desc, "cycle": cycle, "color": color}
+        return {"desc": float(cosines.max()), "cycle": cycle, "color": color}, int(cosines.argmax()), \
+            int(likeness.argmax())
+
+    def _likeness(self, cells: torch.Tensor) -> torch.Tensor:
+        """Per zoom cell, its best cosine with a view's descriptor: how much it looks like the target."""
+        return (F.normalize(cells, dim=-1) @ self.reference.descriptors.T).amax(1)
+
+    @torch.inference_mode()
+    def _refined(self, images: list[np.ndarray], best: list[Candidate]) -> list[Candidate]:
+        """Each image's best candidate with its first point found again in a second, closer zoom (module doc,
+        step 5); unchanged without the zoom."""
+        if any(c.view is None for c in best):
+            return best
+        squares = [square_around(tuple(c.points[0]), max(REFINE_MIN_SIDE, REFINE_SHARE * max(
+            c.box[2] - c.box[0], c.box[3] - c.box[1])), (image.shape[1], image.shape[0]))
+            for image, c in zip(images, best)]
+        feats = self.zoomer.backbone.encode([np.ascontiguousarray(image[y0:y1, x0:x1])
+                                             for image, (x0, y0, x1, y1) in zip(images, squares)]).patches
+        grid = self.zoomer.backbone.grid
+        out = []
+        for image, c, (x0, y0, x1, y1), f in zip(images, best, squares, feats):
+            colour = backprojection(image, self.reference.histogram, self.cfg.color_bins)[y0:y1, x0:x1]
+            colour = cv2.resize(colour, (grid, grid), interpolation=cv2.INTER_AREA).reshape(-1)
+            cell = int(np.argmax(self._likeness(f).numpy() + REFINE_COLOUR * colour))
+            first = np.array([cell_centre((x0, y0, x1, y1), grid, cell)], np.float32)
+            out.append(replace(c, points=np.concatenate([first, c.points])))
+        return out
 
     # ------------------------------------------------------------------ decision
     def _match_batch(self, frames: Frames) -> list[MatchResult]:
         spec = self.decision
+        per_image = self.candidate_signals(frames)
+        scores = [np.array([verdict(spec, signals) for _, signals in rows], np.float32) for rows in per_image]
+        cands = [[c for c, _ in rows] for rows in per_image]
+        best = [int(s.argmax()) for s in scores]
+        for found, b, refined in zip(cands, best, self._refined(frames, [c[b] for c, b in zip(cands, best)])):
+            found[b] = refined
         results = []
-        for rows in self.candidate_signals(frames):
-            scores = np.array([verdict(spec, signals) for _, signals in rows], np.float32)
-            cands = [c for c, _ in rows]
+        for found, s, b in zip(cands, scores, best):
+            order = [b] + [i for i in range(len(found)) if i != b]  # the best candidate's points first
+            views = [c.view for c in found]
             results.append(MatchResult(
-                score=float(scores.max()), points=np.concatenate([c.points for c in cands]),
-                point_scores=np.concatenate([np.full(len(c.points), s, np.float32) for c, s in zip(cands, scores)]),
-                boxes=np.array([c.box for c in cands], np.float32), box_scores=scores))
+                score=float(s.max()), points=np.concatenate([found[i].points for i in order]),
+                point_scores=np.concatenate([np.full(len(found[i].points), s[i], np.float32) for i in order]),
+                boxes=np.array([c.box for c in found], np.float32), box_scores=s,
+                box_views=None if None in views else np.array(views, np.int64)))
         return results
 

@@ -145,7 +145,7 @@ def test_import_pin_match_loads_neither_pandas_nor_torch():
 # when their config changes shape (docs/architecture.md). A new matcher fails nothing here: it is reported (a skip
 # with its id) until its id is added.
 IDS = {"aliked-lightglue": "aliked-lightglue@b1e6f6ad0914", "clip": "clip@e7b5fe327f2d",
-       "cohort-norm": "cohort-norm@5345410ffa76",
+       "cohort-norm": "cohort-norm@c0a8bacfcd24",
        "clip-grad": "clip-grad@e400bb64f306", "clip-text": "clip-text@42f0bd222bcf", "color": "color@f03ae06173d4",
        "dino": "dino@650a30aaa20a", "dinov2": "dinov2@6e1ce2ae4f0f", "disk-lightglue": "disk-lightglue@1280f5648e34",
        "effnet": "effnet@518b38e32c83", "effnet[layer=blocks.3,img_size=224]": "effnet@d1649a13de4e",

@@ -41,3 +41,14 @@ def test_merge_takes_max_over_crops_and_maps_points_into_the_frame():
     assert merged.crop_scores.tolist() == pytest.approx([0.3, 0.8])
     assert merged.points.tolist() == [[10, 20], [10, 300], [5, 280]]
     assert merged.points_at(0.5).tolist() == [[10, 300]]
+
+
+def test_merge_keeps_each_boxs_view_and_maps_the_box_into_the_frame():
+    boxes = crop_boxes(640, 360)
+    box = np.array([[0, 0, 10, 10]], np.float32)
+    parts = [MatchResult(score=0.3, boxes=box, box_scores=np.array([0.3]), box_views=np.array([2])),
+             MatchResult(score=0.8, boxes=box, box_scores=np.array([0.8]), box_views=np.array([1]))]
+    merged = merge_crop_results(parts, boxes)
+    assert merged.boxes.tolist() == [[0, 0, 10, 10], [0, 280, 10, 290]] and merged.box_views.tolist() == [2, 1]
+    parts[0].box_views = None  # a view known for some boxes only is known for none
+    assert merge_crop_results(parts, boxes).box_views is None

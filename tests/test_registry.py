@@ -283,6 +283,10 @@ def test_register_rejects_non_matchers_and_clashes():
     (MatchResult(score=1.0, points=[[1.0, -1.0]]), "outside"),
     (MatchResult(score=1.0, points=[[1.0, 1.0]], point_scores=[1.0, 2.0]), "2 point scores for 1 points"),
     (MatchResult(score=1.0, points=[[1.0, 1.0]], point_scores=[np.nan]), "non-finite point scores"),
+    (MatchResult(score=1.0, box_views=[0]), r"box views that are not one view index \(0-2\) per box"),
+    (MatchResult(score=1.0, boxes=[[0, 0, 4, 4]], box_scores=[1.0], box_views=[3]), "not one view index"),
+    (MatchResult(score=1.0, boxes=[[0, 0, 4, 4]], box_scores=[1.0], box_views=[0, 1]), "not one view index"),
+    (MatchResult(score=1.0, boxes=[[0, 0, 4, 4]], box_scores=[1.0], box_views=[0.5]), "not one view index"),
     ("not a result", "returned str"),
 ])
 def test_base_class_rejects_invalid_results_by_name(tiny_frameset, result, message):

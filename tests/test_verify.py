@@ -25,7 +25,16 @@ from pin_match.fitting.verifier import (
     target_share,
 )
 from pin_match.fitting.verifier_report import candidate_lines, candidate_recall, signal_sets
-from pin_match.matchers.common.candidates import bhattacharyya, color_histogram, locate, region_cells, shaped_box
+from pin_match.matchers.common.candidates import (
+    backprojection,
+    bhattacharyya,
+    cell_centre,
+    color_histogram,
+    locate,
+    region_cells,
+    shaped_box,
+    square_around,
+)
 from pin_match.matchers.verify import (
     DEFAULT_COLOR_GATE,
     DEFAULT_SIGNALS,
@@ -72,6 +81,31 @@ def test_locate_orders_peaks_and_merges_cells_of_an_earlier_box():
     assert found[0].box == (0, 15, 20, 35) and found[1].box == (20, 40, 40, 60)
     assert found[0].points.tolist() == [[5.0, 25.0]] and found[1].points.tolist() == [[35.0, 55.0]]
     assert len(found) == 3  # the third is the best cell outside both boxes (a zero)
+
+
+def test_a_candidates_points_are_its_cells_best_first():
+    maps = np.zeros((1, 4, 4), np.float32)
+    maps[0, 0, 0], maps[0, 0, 1], maps[0, 1, 1] = 0.8, 0.9, 0.85  # one region; row-major order would put 0.8 first
+    (found,) = locate(maps, [Crop(0, 0, 40, 40)], (40, 40), count=1, drop=0.2, aspect=1.0, pad=0.0)
+    assert found.points.tolist() == [[15.0, 5.0], [15.0, 15.0], [5.0, 5.0]] and found.view is None
+
+
+def test_a_zoom_cell_maps_back_into_its_box_and_a_square_fits_the_frame():
+    # a 4 x 4 zoom grid squashed over a 40 x 80 box at (100, 200): cell 6 is row 1, column 2
+    assert cell_centre((100, 200, 140, 280), 4, 6) == pytest.approx((125.0, 230.0))
+    assert square_around((50.0, 50.0), 20, (360, 640)) == (40, 40, 60, 60)
+    assert square_around((355.0, 2.0), 20, (360, 640)) == (340, 0, 360, 20)  # shifted in at the corner
+
+
+def test_backprojection_marks_the_references_colour_by_how_rare_it_is_in_the_frame():
+    frame = np.zeros((4, 8, 3), np.uint8)
+    frame[:, :2, 0] = 220   # a quarter red
+    frame[:, 2:, 2] = 220   # the rest blue
+    bins = (16, 4, 4)
+    red = color_histogram(frame[:, :2], np.ones((4, 2)), bins)  # the reference: all red
+    weights = backprojection(frame, red, bins)
+    # red: r = 1 / 0.25 = 4, weight 4 / 5; blue: not in the reference, 0
+    assert weights[:, :2] == pytest.approx(np.full((4, 2), 0.8)) and not weights[:, 2:].any()
 
 
 def test_colour_overlap_tells_red_from_blue_and_follows_the_weights():
@@ -318,6 +352,10 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
     target_frame = results[0]  # frame 0 shows the target, a disc at (100, 300) + 96 px
     x0, y0, x1, y1 = target_frame.boxes[int(np.argmax(target_frame.box_scores))]
     assert x0 <= 148 <= x1 and y0 <= 348 <= y1
+    # the best point (the first: the second zoom's) lies on the disc, and each box names a reference view
+    assert np.hypot(*(target_frame.points[0] - [148, 348])) <= 48
+    assert target_frame.box_views.shape == target_frame.box_scores.shape
+    assert set(target_frame.box_views.tolist()) <= {0, 1, 2}
 
 
 def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
@@ -334,6 +372,7 @@ def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
     image = tiny_frameset.image(tiny_frameset.frames.frame_id.iloc[0])
     (rows,) = matcher.candidate_signals(Frames([image]))
     assert zoom_passes == [] and rows[0][1]["proto"] == pytest.approx(effnet.match(image).score, abs=1e-6)
+    assert rows[0][0].view is None  # no zoom, no view: the result then has no box views
 
 
 def test_prepare_prepares_the_locate_part_and_the_keypoint_part_only_when_its_signal_is_used(tiny_frameset,
@@ -364,8 +403,9 @@ def test_contract_with_real_weights(tmp_path):
 
 
 def test_the_carried_verifier_file_fits_the_default_signals():
-    """The shipped file records the signals id it was fitted for; a change that moves it (a new hashed config field,
-    a version bump, new weights of a part) makes ``verify`` refuse the file, so such a change must refit it."""
+    """The shipped file records the signals id it was fitted for; a change that moves it (a new hashed config
+    field, a bump of SIGNALS_VERSION, new weights of a part) makes ``verify`` refuse the file, so such a change must
+    refit it."""
     matcher = create_matcher("verify")
     assert matcher.decision["signals_id"] == matcher.signals_id
     assert set(matcher.decision["coefs"]) == set(DEFAULT_SIGNALS)

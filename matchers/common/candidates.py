@@ -19,11 +19,13 @@ from pin_match.contract import Crop
 
 @dataclass(frozen=True)
 class Candidate:
-    """One region of a frame: its box (x0, y0, x1, y1 in frame pixels), its peak cell's score and its cells."""
+    """One region of a frame: its box (x0, y0, x1, y1 in frame pixels), its peak cell's score, its points (the
+    region's cells, best first) and, once zoomed, the reference view it resembles most."""
 
     box: tuple[int, int, int, int]
     peak: float
-    points: np.ndarray  # (K, 2) centres of the region's cells, frame pixels
+    points: np.ndarray  # (K, 2) frame pixels: the region's cell centres by score, best first
+    view: int | None = None
 
 
 def region_cells(scores: np.ndarray, row: int, col: int, drop: float) -> np.ndarray:
@@ -59,7 +61,8 @@ def locate(maps: np.ndarray, crops: list[Crop], frame_shape: tuple[int, int], *,
     box is part of that candidate (the crops overlap). A new peak's region is the cells around
     it within ``drop`` of its score; its box is the region's extent shaped to the reference's
     aspect ratio and padded. A candidate is at least two cells a side, so a one-cell peak
-    still shows the object's surroundings when zoomed.
+    still shows the object's surroundings when zoomed. Its points are the region's cells by
+    score, the peak first (whoever reads one point per candidate reads the peak).
     """
     height, width = frame_shape
     grid = maps.shape[-1]
@@ -74,6 +77,8 @@ def locate(maps: np.ndarray, crops: list[Crop], frame_shape: tuple[int, int], *,
             continue
         region = region_cells(maps[c], row, col, drop)
         rows, cols = np.nonzero(region)
+        best_first = np.argsort(-maps[c][rows, cols], kind="stable")
+        rows, cols = rows[best_first], cols[best_first]
         extent = (crop.x0 + cols.min() * cell_w, crop.y0 + rows.min() * cell_h,
                   crop.x0 + (cols.max() + 1) * cell_w, crop.y0 + (rows.max() + 1) * cell_h)
         box = shaped_box(extent, aspect, pad, 2 * max(cell_w, cell_h), (width, height))
@@ -83,6 +88,20 @@ def locate(maps: np.ndarray, crops: list[Crop], frame_shape: tuple[int, int], *,
         if len(found) == count:
             break
     return found
+
+
+def cell_centre(box: tuple[int, int, int, int], grid: int, cell: int) -> tuple[float, float]:
+    """Frame pixels (x, y) of the centre of cell ``cell`` (row-major) of a ``grid`` x ``grid`` map squashed over
+    ``box``."""
+    row, col = divmod(cell, grid)
+    x0, y0, x1, y1 = box
+    return x0 + (col + 0.5) * (x1 - x0) / grid, y0 + (row + 0.5) * (y1 - y0) / grid
+
+
+def square_around(point: tuple[float, float], side: float, frame_size: tuple[int, int]) -> tuple[int, int, int, int]:
+    """The square of ``side`` pixels centred on ``point`` (x, y), shifted to fit the frame ``(width, height)`` and
+    clipped to it."""
+    return shaped_box((point[0], point[1], point[0], point[1]), 1.0, 0.0, side, frame_size)
 
 
 def mask_aspect(alpha: np.ndarray) -> tuple[float, tuple[int, int, int, int]]:
@@ -98,12 +117,27 @@ def color_histogram(rgb: np.ndarray, weights: np.ndarray, bins: tuple[int, int, 
     Hue is binned finely and value coarsely, so a red and a blue instance differ while a shadow
     moves little; grey pixels (low saturation) still differ by value (white, grey, black).
     """
-    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV).astype(np.int64)
-    nh, ns, nv = bins
-    index = ((hsv[..., 0] * nh // 180) * ns + hsv[..., 1] * ns // 256) * nv + hsv[..., 2] * nv // 256
-    hist = np.bincount(index.ravel(), weights=weights.ravel().astype(np.float64), minlength=nh * ns * nv)
+    index = hsv_bins(rgb, bins)
+    hist = np.bincount(index.ravel(), weights=weights.ravel().astype(np.float64), minlength=int(np.prod(bins)))
     total = hist.sum()
     return hist / total if total > 0 else np.full(len(hist), 1.0 / len(hist))
+
+
+def hsv_bins(rgb: np.ndarray, bins: tuple[int, int, int]) -> np.ndarray:
+    """Each pixel's flat HSV bin (``bins`` = hue, saturation, value counts; OpenCV hue runs 0-179)."""
+    hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV).astype(np.int64)
+    nh, ns, nv = bins
+    return ((hsv[..., 0] * nh // 180) * ns + hsv[..., 1] * ns // 256) * nv + hsv[..., 2] * nv // 256
+
+
+def backprojection(frame: np.ndarray, reference: np.ndarray, bins: tuple[int, int, int]) -> np.ndarray:
+    """Per pixel of ``frame``, how much its colour is the reference's rather than the frame's: r / (1 + r), r the
+    reference histogram ``reference`` over the frame's own at the pixel's bin (``color``'s ratio histogram,
+    Swain & Ballard), in [0, 1): colours common on the target and rare in the frame stand out."""
+    index = hsv_bins(frame, bins)
+    scene = np.bincount(index.ravel(), minlength=len(reference)) / index.size
+    ratio = reference / np.maximum(scene, 1e-12)
+    return (ratio / (1.0 + ratio)).astype(np.float32)[index]
 
 
 def bhattacharyya(p: np.ndarray, q: np.ndarray) -> float:

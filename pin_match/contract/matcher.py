@@ -29,7 +29,7 @@ import numpy as np
 
 from pin_match.contract.crops import POLICIES, Crop, crop_boxes
 from pin_match.contract.frames import Frames
-from pin_match.contract.results import MatchResult, extras_problem, points_problem
+from pin_match.contract.results import N_VIEWS, MatchResult, extras_problem, points_problem
 from pin_match.contract.weights import WeightsSpec
 from pin_match.errors import PinMatchError
 
@@ -40,7 +40,6 @@ class Modality(str, Enum):
     CATEGORY = "category"  # may read the category label (an ablation in the paper)
 
 
-N_VIEWS = 3         # reference views per target: 0 frontal (30 deg yaw), 1 back, 2 top
 N_DESCRIPTIONS = 3  # human-written descriptions per target
 
 
@@ -346,10 +345,14 @@ def merge_crop_results(parts: Sequence[MatchResult], boxes: Sequence[Crop]) -> M
     heatmaps = [p.heatmap for p in parts]
     heatmap = np.stack(heatmaps) if all(h is not None for h in heatmaps) and \
         len({h.shape for h in heatmaps}) == 1 else None
-    boxes_out, box_scores = None, None
-    if any(p.boxes is not None for p in parts):
+    boxes_out, box_scores, box_views = None, None, None
+    boxed = [(p, b) for p, b in zip(parts, boxes) if p.boxes is not None]
+    if boxed:
         boxes_out = np.concatenate([p.boxes.reshape(-1, 4) + np.array([b.x0, b.y0, b.x0, b.y0], np.float32)
-                                    for p, b in zip(parts, boxes) if p.boxes is not None])
-        box_scores = np.concatenate([p.box_scores for p in parts if p.boxes is not None])
+                                    for p, b in boxed])
+        box_scores = np.concatenate([p.box_scores for p, _ in boxed])
+        if all(p.box_views is not None for p, _ in boxed):
+            box_views = np.concatenate([p.box_views for p, _ in boxed])
     return MatchResult(score=float(scores.max()), points=points.astype(np.float32), point_scores=point_scores,
-                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores)
+                       crop_scores=scores, heatmap=heatmap, boxes=boxes_out, box_scores=box_scores,
+                       box_views=box_views)

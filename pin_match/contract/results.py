@@ -10,6 +10,8 @@ from typing import Any
 
 import numpy as np
 
+N_VIEWS = 3  # reference views per target: 0 frontal (30 deg yaw), 1 back, 2 top (a box's view indexes them)
+
 
 def _point_array(a: Any) -> np.ndarray:
     return np.asarray(a, dtype=np.float32).reshape(-1, 2) if a is not None else np.zeros((0, 2), np.float32)
@@ -26,6 +28,7 @@ class MatchResult:
     heatmap: np.ndarray | None = None        # low-resolution score map (per crop: n_crops x h x w)
     boxes: np.ndarray | None = None          # (M, 4) x0, y0, x1, y1 in image pixels
     box_scores: np.ndarray | None = None     # (M,)
+    box_views: np.ndarray | None = None      # (M,) the reference view (index into Target.views) each box matched best
 
     def __post_init__(self) -> None:
         self.points = _point_array(self.points)
@@ -78,4 +81,9 @@ def extras_problem(r: MatchResult) -> str | None:
         return "returned non-finite crop scores"
     if r.boxes is not None and (r.box_scores is None or len(r.box_scores) != len(np.asarray(r.boxes).reshape(-1, 4))):
         return "returned boxes without one box score each"
+    if r.box_views is not None:
+        views = np.asarray(r.box_views)
+        if r.boxes is None or views.shape != (len(np.asarray(r.boxes).reshape(-1, 4)),) \
+                or views.dtype.kind not in "iu" or (len(views) and (views.min() < 0 or views.max() >= N_VIEWS)):
+            return f"returned box views that are not one view index (0-{N_VIEWS - 1}) per box"
     return None
