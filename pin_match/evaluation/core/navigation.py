@@ -84,6 +84,9 @@ class Placements:
         self.walked = _cumsum_by_episode(moved, arr.episode)  # metres walked up to each frame
         self._points: dict[str, FramePoints] = {}
         self._roles = _role_values(fs)
+        # read per stop at every sigma of a sweep: looked up in dicts, not in the tables
+        self.category = dict(zip(fs.objects.object_id, fs.objects.category.astype(str)))
+        self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
 
     def points(self, frame_id: str) -> FramePoints:
         if frame_id not in self._points:
@@ -144,7 +147,7 @@ def _episode(places: Placements, line: np.ndarray, start: int, end: int, fired: 
              matched: np.ndarray) -> dict:
     episode_id = str(places.arrays.episode_ids[places.arrays.episode[start]])
     geometry = places.geometry.episodes[episode_id]
-    target_id = str(places.fs.episode(episode_id).target_object_id)
+    target_id = places.target[episode_id]
     target = np.asarray(geometry.positions[target_id])
     unplaced = 0
     for t in np.flatnonzero(fired[start:end]) + start:
@@ -170,7 +173,7 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
     target = np.asarray(geometry.positions[target_id])
     d2g = float(np.linalg.norm(point - target))
     same = [np.asarray(xyz) for oid, xyz in geometry.positions.items()
-            if oid != target_id and _category(places.fs, oid) == _category(places.fs, target_id)]
+            if oid != target_id and places.category[oid] == places.category[target_id]]
     near_same = any(np.linalg.norm(point - xyz) <= SUCCESS_DISTANCE for xyz in same)
     outcome = "success" if d2g <= SUCCESS_DISTANCE else "category error" if near_same else "other stop"
     ahead = point[:2] - places.xy[t]
@@ -187,10 +190,6 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
                 point_frame_id=str(places.frame_ids[source]), landed_on=landed_on, point_x=float(point[0]),
                 point_y=float(point[1]), point_z=float(point[2]), d2g=d2g, path=path, geodesic=geodesic, spl=spl,
                 steps=steps)
-
-
-def _category(fs: FrameSet, object_id: str) -> str:
-    return str(fs.objects.loc[fs.objects.object_id == object_id, "category"].iloc[0])
 
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
