@@ -18,8 +18,7 @@ REDO = ("rerun `pin-match demo --tune --out DIR` and copy DIR/{folder}demo_sigma
 @pytest.mark.slow
 @pytest.mark.parametrize("demo_set", DEMO_SETS, ids=lambda s: s.sigmas)
 def test_the_shipped_sigmas_were_tuned_on_this_set_for_these_matchers(demo_set, tmp_path):
-    assert demo_set.shipped.is_file(), REDO.format(folder=f"{demo_set.folder}/" if demo_set.folder else "",
-                                                   file=demo_set.sigmas)
+    redo = REDO.format(folder=f"{demo_set.folder}/" if demo_set.folder else "", file=demo_set.sigmas)
+    assert demo_set.shipped.is_file(), redo
     fs = demo_set.build(tmp_path / "frameset", 0, RunOptions(workers=2, progress=False))
-    assert shipped_sigmas(demo_set, fs) == demo_set.shipped, \
-        REDO.format(folder=f"{demo_set.folder}/" if demo_set.folder else "", file=demo_set.sigmas)
+    assert shipped_sigmas(demo_set, fs) == demo_set.shipped, redo

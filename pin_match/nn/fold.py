@@ -28,8 +28,8 @@ class AfterNorm(nn.Module):
         return self.act(self.drop(x))
 
 
-def conv_norm_pairs(model: nn.Module, example: torch.Tensor) -> list[tuple[str, nn.Conv2d, str, nn.BatchNorm2d]]:
-    """(conv name, conv, norm name, norm) for every norm that reads a convolution's output and nothing else does."""
+def conv_norm_pairs(model: nn.Module, example: torch.Tensor) -> list[tuple[nn.Conv2d, str, nn.BatchNorm2d]]:
+    """(conv, norm name, norm) for every norm that reads a convolution's output and nothing else does."""
     names = {m: n for n, m in model.named_modules()}
     produced: dict[int, tuple[nn.Conv2d, torch.Tensor]] = {}
     calls: dict[nn.Module, int] = {}
@@ -54,7 +54,7 @@ def conv_norm_pairs(model: nn.Module, example: torch.Tensor) -> list[tuple[str, 
     finally:
         for h in handles:
             h.remove()
-    return [(names[conv], conv, names[read[0]], read[0]) for conv, read in readers.items()
+    return [(conv, names[read[0]], read[0]) for conv, read in readers.items()
             if calls[conv] == 1 and len(read) == 1 and isinstance(read[0], nn.BatchNorm2d)]
 
 
@@ -66,7 +66,7 @@ def fold_batch_norms(model: nn.Module, example: torch.Tensor) -> int:
         raise ValueError("batch norms fold only into a network in eval mode")
     pairs = conv_norm_pairs(model, example)
     with torch.no_grad():
-        for _, conv, norm_name, norm in pairs:
+        for conv, norm_name, norm in pairs:
             scale = norm.weight / torch.sqrt(norm.running_var + norm.eps)
             bias = norm.bias - norm.running_mean * scale
             if conv.bias is not None:
