@@ -211,6 +211,7 @@ def test_a_table_cached_under_the_old_layout_is_found(tmp_path, tiny_frameset):
     frames["score"] = 0.5
     for c in ("crop_scores", "points_x", "points_y", "point_scores"):
         frames[c] = [[] for _ in range(len(frames))]
+    frames["view"] = -1
     ScoreTable(frames[COLUMNS], dict(matcher="color", matcher_id=IDS["color"])).write(
         folder / "scores_all.parquet")
     assert find_score_table(tmp_path, tiny_frameset, "color") == folder / "scores_all.parquet"

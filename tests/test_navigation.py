@@ -57,7 +57,7 @@ def table_of(fs: FrameSet, scores: list[float], points=None) -> ScoreTable:
     """A score table of ``walk_set``: one score a step, its points (default: the frame's centre) carrying it."""
     points = points or [(CENTRE,)] * len(WALK)
     rows = [dict(frame_id=f"e_{step:04d}", episode_id="e", step=step, split="val", score=s, crop_scores=[s],
-                 points_x=[p[0] for p in pts], points_y=[p[1] for p in pts], point_scores=[s] * len(pts))
+                 points_x=[p[0] for p in pts], points_y=[p[1] for p in pts], point_scores=[s] * len(pts), view=-1)
             for step, (s, pts) in enumerate(zip(scores, points))]
     return ScoreTable(pd.DataFrame(rows), dict(matcher="hand", matcher_id="hand@0",
                                                frameset_fingerprint=fs.fingerprint))
@@ -146,7 +146,7 @@ def test_sigma_tuned_for_sr_sees_what_first_match_cannot(walk_set):
 
 def test_a_frameset_without_geometry_says_why(tiny_frameset):
     rows = [dict(frame_id=f, episode_id=e, step=s, split=sp, score=0.5, crop_scores=[0.5], points_x=[1.0],
-                 points_y=[1.0], point_scores=[0.5])
+                 points_y=[1.0], point_scores=[0.5], view=-1)
             for f, e, s, sp in tiny_frameset.frames[["frame_id", "episode_id", "step", "split"]].itertuples(False)]
     table = ScoreTable(pd.DataFrame(rows), dict(matcher="hand", matcher_id="hand@0",
                                                 frameset_fingerprint=tiny_frameset.fingerprint))
@@ -336,7 +336,7 @@ def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
             k = int(np.argmin((px - px.mean()) ** 2 + (py - py.mean()) ** 2))
             score, xs, ys = float(row.pixels) / (f.height * f.width), [px[k] + 0.5], [py[k] + 0.5]
         rows.append(dict(frame_id=f.frame_id, episode_id=f.episode_id, step=f.step, split=f.split, score=score,
-                         crop_scores=[score], points_x=xs, points_y=ys, point_scores=[score] * len(xs)))
+                         crop_scores=[score], points_x=xs, points_y=ys, point_scores=[score] * len(xs), view=-1))
     return ScoreTable(pd.DataFrame(rows), dict(matcher=f"oracle-{role}", matcher_id=f"oracle-{role}@0",
                                                frameset_fingerprint=fs.fingerprint))
 

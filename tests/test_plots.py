@@ -42,7 +42,7 @@ def scored_table(fs, tmp_path, matcher_id: str) -> ScoreTable:
     step_scores = (0.9, 0.6, 0.3, 0.1)
     rows = [dict(frame_id=f.frame_id, episode_id=f.episode_id, step=int(f.step), split=f.split,
                  score=step_scores[int(f.step)], crop_scores=[step_scores[int(f.step)]], points_x=[148.0],
-                 points_y=[348.0], point_scores=[step_scores[int(f.step)]]) for f in fs.frames.itertuples()]
+                 points_y=[348.0], point_scores=[step_scores[int(f.step)]], view=-1) for f in fs.frames.itertuples()]
     meta = dict(matcher=matcher_id.split("@")[0], matcher_id=matcher_id, config_hash=matcher_id.split("@")[1],
                 frameset_fingerprint=fs.fingerprint, default_sigma=0.5, modality="visual")
     ScoreTable(pd.DataFrame(rows), meta).write(tmp_path / "scores.parquet")

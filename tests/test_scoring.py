@@ -163,3 +163,25 @@ def test_an_empty_lock_left_by_a_kill_is_taken_over(tiny_frameset, tmp_path):
     again = score(tiny_frameset, "color", out=tmp_path / "ref", run=QUIET)
     assert time.monotonic() - start < 60 and again.frames.equals(ref.frames)
     assert not lock.exists()
+
+
+def test_a_cache_of_the_columns_before_view_is_scored_again_not_crashed_on(tiny_frameset, tmp_path, capsys):
+    """Issue 51.4: a table and chunks written before the ``view`` column existed are no hit; every chunk counts as
+    damaged (named once), and the table comes out as a fresh run's."""
+    import pyarrow.parquet as pq
+
+    ref = score(tiny_frameset, "color", out=tmp_path / "ref", run=QUIET)
+    out = tmp_path / "old"
+    score(tiny_frameset, "color", out=out, run=QUIET)
+    (table,) = out.glob("*/*/scores_all.parquet")
+    chunks = sorted(out.glob("*/*/chunks/*.parquet"))
+    for path in [table, *chunks]:
+        whole = pq.read_table(path)
+        pq.write_table(whole.drop_columns(["view"]).replace_schema_metadata(whole.schema.metadata), path)
+    capsys.readouterr()
+    again = score(tiny_frameset, "color", out=out, run=QUIET)
+    err = capsys.readouterr().err
+    assert err.count("damaged score chunk") == len(chunks) == 2 and "'view'" in err and "Traceback" not in err
+    assert again.frames.equals(ref.frames) and table.read_bytes() == next((tmp_path / "ref").glob(
+        "*/*/scores_all.parquet")).read_bytes()
+    assert (again.frames.view == -1).all()  # color names no view

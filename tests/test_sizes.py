@@ -138,7 +138,7 @@ def tiny_table(fs, scores: list[float]) -> ScoreTable:
     """Every frame of the tiny set (val: target, look-alike, other, nothing) with its score and one point at the
     centre of the disc every object is drawn as."""
     rows = [dict(frame_id=f, episode_id=e, step=s, split=sp, score=score, crop_scores=[score], points_x=[148.0],
-                 points_y=[348.0], point_scores=[score])
+                 points_y=[348.0], point_scores=[score], view=-1)
             for (f, e, s, sp), score in zip(fs.frames[["frame_id", "episode_id", "step", "split"]].itertuples(
                 index=False), scores * 2)]
     meta = dict(matcher="stub", matcher_id=f"stub@{scores[0]}", config_hash="abc", config={},

@@ -34,7 +34,7 @@ def make_table(fs, tmp_path) -> ScoreTable:
             rows.append(dict(frame_id=f"{episode}_{step:04d}", episode_id=episode, step=step,
                              split=episode.split("_")[1], score=score, crop_scores=[score, score],
                              points_x=[p[0] for p in points], points_y=[p[1] for p in points],
-                             point_scores=point_scores))
+                             point_scores=point_scores, view=-1))
     meta = dict(matcher="stub", matcher_id="stub@abc", config_hash="abc", frameset_fingerprint=fs.fingerprint,
                 default_sigma=0.5, modality="visual")
     ScoreTable(pd.DataFrame(rows), meta).write(tmp_path / "scores.parquet")

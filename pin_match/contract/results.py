@@ -10,7 +10,9 @@ from typing import Any
 
 import numpy as np
 
-N_VIEWS = 3  # reference views per target: 0 frontal (30 deg yaw), 1 back, 2 top (a box's view indexes them)
+VIEW_NAMES = ("frontal", "back", "top")  # the reference views per target by index (frontal after a 30 deg yaw)
+N_VIEWS = len(VIEW_NAMES)  # a box's view indexes them
+NO_VIEW = -1  # the view of a result whose boxes name none
 
 
 def _point_array(a: Any) -> np.ndarray:
@@ -39,6 +41,14 @@ class MatchResult:
         if self.point_scores is None:
             return np.full(len(self.points), self.score, np.float32)
         return self.point_scores
+
+    def best_view(self) -> int:
+        """The reference view its best box (the highest box score; the first among equals) matched, or ``NO_VIEW``
+        when the matcher named no views: what a score table keeps of the boxes, so a report can say which view
+        matched."""
+        if self.box_views is None or not len(self.box_views):
+            return NO_VIEW
+        return int(np.asarray(self.box_views)[int(np.argmax(np.asarray(self.box_scores, np.float64)))])
 
     def points_at(self, sigma: float) -> np.ndarray:
         """The target's coordinates under threshold sigma (empty when the frame is not matched)."""

@@ -20,7 +20,16 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import COLUMNS, TARGETS, as_stored, chunk_notes, decode_meta, encode_meta
+from pin_match.scoring.schema import (
+    COLUMNS,
+    TARGETS,
+    as_stored,
+    chunk_notes,
+    decode_meta,
+    encode_meta,
+    mismatch,
+    produced_by,
+)
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 
@@ -78,6 +87,15 @@ def read_meta(path: Path) -> dict | None:
         if exc.errno is None:  # pyarrow's own "cannot parse the footer": a damaged file, no system error
             return None
         raise ScoreTableError(f"cannot read the score table {path} ({type(exc).__name__}: {exc})") from exc
+
+
+def is_current(path: Path, meta: dict, schema: Any) -> bool:
+    """Whether the table at ``path`` is this run's: its metadata ``meta`` (``schema.produced_by``) and its columns
+    and types ``schema``'s. A table in an older version's columns is assembled again, and its chunks, in those
+    columns too, count as damaged and are scored again (``schema.chunk_rows``)."""
+    import pyarrow.parquet as pq
+
+    return produced_by(read_meta(path), meta) and mismatch(pq.read_schema(path), schema) is None
 
 
 def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:

@@ -24,7 +24,8 @@ from pin_match.contract.matcher import MatchResult
 
 _TEXT, _INT, _FLOAT, _FLOATS = "text", "int64", "float64", "float32 list"
 _TYPES = {"frame_id": _TEXT, "episode_id": _TEXT, "step": _INT, "split": _TEXT, "score": _FLOAT,
-          "crop_scores": _FLOATS, "points_x": _FLOATS, "points_y": _FLOATS, "point_scores": _FLOATS}
+          "crop_scores": _FLOATS, "points_x": _FLOATS, "points_y": _FLOATS, "point_scores": _FLOATS,
+          "view": _INT}  # the reference view the frame's best box matched (``MatchResult.best_view``; -1: none named)
 COLUMNS = list(_TYPES)
 META_KEY = b"pin_match"
 NOTES_KEY = b"pin_match_target_notes"  # a chunk's: {target id: what prepare derived} (``Matcher.target_notes``)
@@ -50,7 +51,8 @@ def episode_rows(episode_id: str, split: str, frame_ids: list[str], steps: np.nd
     """One episode's rows in the table's columns and types, in step order.
 
     A matcher that scores the frame as a whole has no crop scores: its frame score stands as
-    the one crop score, so every row has at least one.
+    the one crop score, so every row has at least one. Of the boxes only the best one's view is
+    kept, all a report says of them.
     """
     return pd.DataFrame(dict(
         frame_id=frame_ids, episode_id=episode_id, step=np.asarray(steps, np.int64), split=str(split),
@@ -60,6 +62,7 @@ def episode_rows(episode_id: str, split: str, frame_ids: list[str], steps: np.nd
         points_x=[r.points[:, 0].astype(np.float32) for r in results],
         points_y=[r.points[:, 1].astype(np.float32) for r in results],
         point_scores=[r.scores_of_points().astype(np.float32) for r in results],
+        view=np.array([r.best_view() for r in results], np.int64),
     ))
 
 

@@ -7,6 +7,7 @@ parquet file's metadata names the matcher, its config hash and the frame-set fin
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -56,6 +57,7 @@ class ScoreTable:
     def write(self, path: str | Path) -> None:
         import pyarrow as pa
 
+        require_columns(self.frames, f"score table of {self.matcher_id}")
         table = pa.Table.from_pandas(self.frames[COLUMNS], preserve_index=False)
         atomic.write_parquet(path, table.replace_schema_metadata({**(table.schema.metadata or {}),
                                                                   **encode_meta(self.meta)}))
@@ -77,9 +79,7 @@ class ScoreTable:
         if meta is None:
             raise ScoreTableError(f"{path} is not a pin_match score table (no metadata)")
         frames = table.to_pandas()
-        missing = [c for c in COLUMNS if c not in frames.columns]
-        if missing:
-            raise ScoreTableError(f"{path} lacks columns {missing}")
+        require_columns(frames, str(path))
         require_finite(frames.frame_id, frames.score, str(path), ScoreTableError)
         return cls(frames, meta)
 
@@ -96,6 +96,14 @@ def table_in(directory: Path) -> Path:
         raise ScoreTableError(f"no score table (scores*.parquet) in {directory}")
     raise ScoreTableError(f"{directory} holds {len(candidates)} score tables ({', '.join(c.name for c in candidates)})"
                           f" and no scores_all.parquet: name one of them")
+
+
+def require_columns(frames: pd.DataFrame, where: str, columns: Sequence[str] = COLUMNS) -> None:
+    """A table without the columns of today's schema (one written by hand, or by an older version) is refused,
+    naming the columns it lacks, before any of them is read."""
+    missing = [c for c in columns if c not in frames.columns]
+    if missing:
+        raise ScoreTableError(f"{where} lacks columns {missing}")
 
 
 def require_finite(frame_ids: pd.Series, scores: pd.Series, where: str,
