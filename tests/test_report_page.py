@@ -28,14 +28,20 @@ PLANTED_POINT = (50.0, 60.0)
 SIGMA = 0.5
 
 
-def make_table(fs) -> ScoreTable:
+# the views the best boxes matched where a matcher names them: the val target frame (a miss) from behind, the
+# look-alike (a false alarm) frontal, the other object (the planted false alarm) from the top, the empty frame none
+VIEWS = {"ep_val_0000": 1, "ep_val_0001": 0, PLANTED: 2, "ep_val_0003": -1}
+
+
+def make_table(fs, views: dict[str, int] | None = None) -> ScoreTable:
     rows = []
     for episode, scores in SCORES.items():
         for step, score in enumerate(scores):
             frame_id = f"{episode}_{step:04d}"
             x, y = PLANTED_POINT if frame_id == PLANTED else (148.0, 348.0)
             rows.append(dict(frame_id=frame_id, episode_id=episode, step=step, split=episode.split("_")[1],
-                             score=score, crop_scores=[score], points_x=[x], points_y=[y], point_scores=[score]))
+                             score=score, crop_scores=[score], points_x=[x], points_y=[y], point_scores=[score],
+                             view=(views or {}).get(frame_id, -1)))
     meta = dict(matcher="stub", matcher_id="stub@abc", config_hash="abc", config={"weights": "none.pt"},
                 frameset_fingerprint=fs.fingerprint, default_sigma=SIGMA, modality="visual")
     return ScoreTable(pd.DataFrame(rows), meta)
@@ -100,6 +106,48 @@ def test_report_writes_a_self_contained_page(tiny, tmp_path):
         assert (tmp_path / src).is_file() and (tmp_path / src).stat().st_size > 0
     alarms = text[text.index('id="false_alarms"'):text.index('id="misses"')]
     assert alarms.index(f"frame {PLANTED}") < alarms.index("frame ep_val_0001")
+    assert 'id="views"' not in text and "view: " not in text and "views" not in result["files"]  # none named
+
+
+def _caption(text: str, frame_id: str, section: str) -> str:
+    start = text.index(f'id="{section}"')
+    start = text.index(f"frame {frame_id}<", start)
+    return text[text.rindex("<figcaption>", 0, start):text.index("</figcaption>", start)]
+
+
+def test_the_report_says_which_view_matched_where_the_matcher_names_views(tiny, tmp_path):
+    """Issue 51.4: views.csv and its section with the counts of ``VIEWS`` at sigma 0.5, each gallery frame's caption
+    with its view; a later report of a matcher naming none leaves neither behind."""
+    fs, _ = tiny
+    result = report(make_table(fs, VIEWS), EvalContext(fs, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA, split="val")
+    views = pd.read_csv(result["files"]["views"], index_col="view")
+    assert views[["tm_matched", "cm_matched", "target_frames"]].to_dict("index") == {
+        "frontal": dict(tm_matched=0, cm_matched=1, target_frames=0),  # the look-alike at 0.6, matched
+        "back": dict(tm_matched=0, cm_matched=0, target_frames=1),     # the target at 0.3, missed
+        "top": dict(tm_matched=0, cm_matched=0, target_frames=0),      # the other object: neither TM nor CM
+        "none named": dict(tm_matched=0, cm_matched=0, target_frames=0)}
+    assert set(views.sigma) == {SIGMA} and set(views.sigma_source) == {"given"}
+    text = (tmp_path / "report.html").read_text(encoding="utf-8")
+    section = text[text.index('id="views"'):]
+    section = section[:section.index("<h2")]
+    assert "Which reference view matched" in section and "matched, look-alike only (CM)" in section
+    assert "sigma 0.5 (given)" in section
+    assert "view: back" in _caption(text, "ep_val_0000", "misses")
+    assert "view: frontal" in _caption(text, "ep_val_0001", "false_alarms")
+    assert "view: top" in _caption(text, PLANTED, "false_alarms")
+    assert "view: " not in _caption(text, "ep_val_0003", "false_alarms")  # no view named for it
+    again = report(make_table(fs), EvalContext(fs, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA, split="val")
+    assert "views" not in again["files"] and not (tmp_path / "views.csv").exists()
+    assert 'id="views"' not in (tmp_path / "report.html").read_text(encoding="utf-8")
+
+
+def test_a_table_without_the_view_column_is_named_by_the_report(tiny, tmp_path):
+    from pin_match.scoring.table import ScoreTableError
+
+    fs, table = tiny
+    bare = ScoreTable(table.frames.drop(columns="view"), table.meta)
+    with pytest.raises(ScoreTableError, match=r"score table of stub@abc lacks columns \['view'\]"):
+        report(bare, EvalContext(fs, Bootstrap(n_boot=20)), tmp_path, sigma=SIGMA, split="val")
 
 
 def test_the_images_folder_starts_empty_and_one_that_cannot_be_emptied_is_named(tmp_path):
@@ -125,7 +173,9 @@ def test_gallery_figure_for_notebooks(tiny):
     fs, table = tiny
     scored = scored_frames(frame_labels(fs), table)
     fig = section_figure(fs, table, sections(scored, SIGMA)[0], SIGMA, max_frames=2)
-    assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title()
+    assert len(fig.axes) == 8 and PLANTED in fig.axes[0].get_title() and "view" not in fig.axes[0].get_title()
+    fig = section_figure(fs, make_table(fs, VIEWS), sections(scored, SIGMA)[0], SIGMA, max_frames=2)
+    assert fig.axes[0].get_title().endswith("view: top")
 
 
 def test_a_normalised_tables_report_shows_each_targets_cohort_beside_its_scores(tiny, tmp_path):

@@ -49,6 +49,7 @@ class ReportFiles:
     navigation: Path  # each episode's stop (``navigation.episodes_at``); written where the frame-set has geometry
     navigation_curves: Path
     sizes: Path  # the figures per band of the objects' pixel area (``sizes.size_table``)
+    views: Path  # frames per reference view their best box matched (``views.view_table``); where the matcher names any
     page: Path
 
     @classmethod
@@ -59,7 +60,7 @@ class ReportFiles:
                    score_distributions=folder / "score_distributions.png",
                    per_category_plot=folder / "per_category.png", navigation=folder / "navigation.csv",
                    navigation_curves=folder / "navigation_curves.png", sizes=folder / "sizes.csv",
-                   page=folder / REPORT_PAGE)
+                   views=folder / "views.csv", page=folder / REPORT_PAGE)
 
 
 @dataclass(frozen=True)

@@ -1,4 +1,5 @@
-"""One matcher's report folder at one sigma: metrics.json, per_category.csv, sizes.csv, the paper's tables, plots.
+"""One matcher's report folder at one sigma: metrics.json, per_category.csv, sizes.csv, views.csv (where the matcher
+names the reference view its boxes matched), the paper's tables, plots.
 
 ``report`` only assembles: sigma comes from ``pin_match.evaluation.core.sigma``, numbers from
 ``pin_match.evaluation``, tables from ``pin_match.evaluation.core.tables``, figures from
@@ -22,6 +23,7 @@ from pin_match.evaluation.core.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.core.sizes import best_point_hits, readable, size_table
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tables import latex_table, markdown_table, report_tables
+from pin_match.evaluation.core.views import view_table
 from pin_match.evaluation.pages.plots import (
     plot_navigation_curves,
     plot_per_category,
@@ -55,6 +57,7 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
                            ctx.fs.instance_mask)
     sizes = size_table(evaluation.frames, ctx.fs.visibility, choice.value, hits)
     atomic.write_text(files.sizes, sizes.assign(sigma=choice.value, sigma_source=choice.source).to_csv())
+    views = view_table(evaluation.frames, table, choice.value)
     title = f"{table.matcher_id}, split {result['split']}, sigma = {choice.value:g} ({choice.source})"
     atomic.write_text(files.markdown, f"# {title}\n\nsigma: {choice.detail}\n\n{markdown_table(overall)}\n\n"
                                       f"## Per target category\n\n{markdown_table(per_cat)}\n\n"
@@ -64,8 +67,10 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     plot_sigma_curves(sweep(evaluation.arrays), choice.value, files.sigma_curves, title)
     plot_score_distributions(evaluation.arrays, choice.value, files.score_distributions, title)
     plot_per_category(evaluation.per_category, files.per_category_plot, title)
-    for stale in (files.navigation, files.navigation_curves):
+    for stale in (files.navigation, files.navigation_curves, files.views):
         stale.unlink(missing_ok=True)
+    if views is not None:
+        atomic.write_text(files.views, views.assign(sigma=choice.value, sigma_source=choice.source).to_csv())
     if evaluation.walks is not None:
         atomic.write_text(files.navigation, evaluation.walks.to_csv(index=False))
         curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score))

@@ -14,8 +14,10 @@ import cv2
 import numpy as np
 import pandas as pd
 
+from pin_match.contract.results import NO_VIEW, VIEW_NAMES
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.labels import frame_classes
+from pin_match.evaluation.core.views import best_views
 from pin_match.scoring.table import ScoreTable, points_at
 
 ROLE_NAMES = ("target", "same-category look-alike", "other", "nothing")  # per class code, labels.TM .. OM
@@ -91,6 +93,12 @@ def frame_points(table: ScoreTable, frame_id: str, sigma: float) -> np.ndarray:
     return points_at(rows.iloc[0], sigma) if len(rows) else np.zeros((0, 2), np.float32)
 
 
+def frame_view(table: ScoreTable, frame_id: str) -> str | None:
+    """The name of the reference view the frame's best box matched; None where the matcher named none."""
+    view = best_views(table).get(frame_id, NO_VIEW)
+    return None if view == NO_VIEW else VIEW_NAMES[view]
+
+
 def thumbnail(image: np.ndarray, box: int = THUMB_SIZE) -> np.ndarray:
     """Shrink to fit a ``box`` x ``box`` square keeping the aspect (never enlarge): small files, any orientation."""
     h, w = image.shape[:2]
@@ -123,8 +131,9 @@ def section_figure(fs: FrameSet, table: ScoreTable, section: Section, sigma: flo
         ax.axis("off")
     for ax_row, (_, frame) in zip(axes, frames.iterrows()):
         ax_row[0].imshow(draw_frame(fs, frame.frame_id, frame_points(table, frame.frame_id, sigma)))
-        ax_row[0].set_title(f"{frame.frame_id} ({frame.episode_id})\n{frame.role}, score {frame.score:.3g}",
-                            fontsize=8)
+        view = frame_view(table, frame.frame_id)
+        ax_row[0].set_title(f"{frame.frame_id} ({frame.episode_id})\n{frame.role}, score {frame.score:.3g}"
+                            + (f", view: {view}" if view else ""), fontsize=8)
         target = fs.target(fs.episode(frame.episode_id).target_object_id)
         for ax, view in zip(ax_row[1:], target.views):
             ax.imshow(on_checkerboard(view))

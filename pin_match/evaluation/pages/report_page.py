@@ -19,11 +19,12 @@ from pin_match.evaluation.core.evaluator import Evaluation
 from pin_match.evaluation.core.layout import ReportFiles
 from pin_match.evaluation.core.tables import report_tables
 from pin_match.evaluation.pages import html
-from pin_match.evaluation.pages.gallery import DEFAULT_CAP, Section, frame_points, sections
+from pin_match.evaluation.pages.gallery import DEFAULT_CAP, Section, frame_points, frame_view, sections
 from pin_match.evaluation.pages.pictures import cohort_members, frame_image, legend, references
 from pin_match.evaluation.pages.scales import LOOKALIKE, scale_table, target_cohorts
 from pin_match.evaluation.pages.sizes_page import sizes_section
 from pin_match.evaluation.pages.stop_page import stop_html
+from pin_match.evaluation.pages.views_page import views_section
 from pin_match.scoring.table import ScoreTable
 
 ASSETS = "report_files"
@@ -56,6 +57,9 @@ def frame_figure(fs: FrameSet, table: ScoreTable, frame: pd.Series, sigma: float
     lines = [f"score {frame.score:.4g} ({'above' if matched else 'below'} sigma), {len(points)} points",
              f"role: {frame.role}", f"episode {frame.episode_id}, step {frame.step}",
              f"frame {frame.frame_id}", f"target {target_id} ({frame.target_category})"]
+    view = frame_view(table, frame.frame_id)
+    if view is not None:
+        lines.insert(1, f"view: {view}")
     good = (frame.role == "target") == matched
     images = [frame_image(assets, fs, frame.frame_id, points), references(assets, fs.target(target_id))]
     cohort = cohorts.get(target_id)
@@ -159,6 +163,7 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
              html.heading("Per target category"), html.table(per_category), html.heading("Plots"),
              html.gallery([html.image(plot.name, alt, 440) for plot, alt in plots if plot.exists()]), page_legend()]
     parts += sizes_section(files.sizes)
+    parts += views_section(files.views)
     parts += navigation_html(fs, table, evaluation, sigma, assets)
     parts += stop_html(evaluation.arrays, sigma)
     cohorts = target_cohorts(table)
