@@ -14,6 +14,7 @@ import pytest
 import toys  # noqa: F401  (registers test-slow)
 
 from pin_match.scoring import RunOptions, Shard, merge, score
+from pin_match.scoring.schema import decode_meta, encode_meta
 from pin_match.scoring.table import ScoreTable
 
 QUIET = RunOptions(progress=False)
@@ -175,9 +176,12 @@ def test_a_cache_of_the_columns_before_view_is_scored_again_not_crashed_on(tiny_
     score(tiny_frameset, "color", out=out, run=QUIET)
     (table,) = out.glob("*/*/scores_all.parquet")
     chunks = sorted(out.glob("*/*/chunks/*.parquet"))
-    for path in [table, *chunks]:
+    for path in [table, *chunks]:  # as an older version wrote them: without the column, its metadata without `columns`
         whole = pq.read_table(path)
-        pq.write_table(whole.drop_columns(["view"]).replace_schema_metadata(whole.schema.metadata), path)
+        meta = decode_meta(whole.schema.metadata)
+        older = {**whole.schema.metadata, **encode_meta({k: v for k, v in meta.items() if k != "columns"})} if meta \
+            else whole.schema.metadata
+        pq.write_table(whole.drop_columns(["view"]).replace_schema_metadata(older), path)
     capsys.readouterr()
     again = score(tiny_frameset, "color", out=out, run=QUIET)
     err = capsys.readouterr().err

@@ -25,12 +25,12 @@ from pin_match import atomic, outputs
 from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
-from pin_match.scoring.cache import Shard, cache_dir, is_current, table_name
+from pin_match.scoring.cache import Shard, cache_dir, read_meta, table_name
 from pin_match.scoring.episode import Output
 from pin_match.scoring.local import score_here
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.product import Job
-from pin_match.scoring.schema import chunk_path
+from pin_match.scoring.schema import chunk_path, produced_by
 from pin_match.scoring.table import ScoreTable
 
 
@@ -100,7 +100,7 @@ def run_jobs(frameset: FrameSet | str | Path, jobs: Sequence[Job], *, split: str
         final = root / table_name(split, shard, job.product.prefix)
         meta = job.product.meta(job.matcher, fs, split, shard)
         finals.append(final)
-        if not (final.exists() and is_current(final, meta, job.product.schema())) and final not in todo:
+        if not (final.exists() and produced_by(read_meta(final), meta)) and final not in todo:
             todo[final] = (job, Output(job.product, atomic.ensure_dir(root / "chunks")), meta)
     if todo:
         _run(part, list(todo.values()), episode_ids, run)

@@ -27,8 +27,6 @@ from pin_match.scoring.schema import (
     chunk_notes,
     decode_meta,
     encode_meta,
-    mismatch,
-    produced_by,
 )
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
@@ -89,18 +87,11 @@ def read_meta(path: Path) -> dict | None:
         raise ScoreTableError(f"cannot read the score table {path} ({type(exc).__name__}: {exc})") from exc
 
 
-def is_current(path: Path, meta: dict, schema: Any) -> bool:
-    """Whether the table at ``path`` is this run's: its metadata ``meta`` (``schema.produced_by``) and its columns
-    and types ``schema``'s. A table in an older version's columns is assembled again, and its chunks, in those
-    columns too, count as damaged and are scored again (``schema.chunk_rows``)."""
-    import pyarrow.parquet as pq
-
-    return produced_by(read_meta(path), meta) and mismatch(pq.read_schema(path), schema) is None
-
-
 def table_meta(matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
-    """The metadata a table carries, as it reads back (so a cached table compares equal)."""
-    meta = dict(matcher=matcher.display_name, matcher_id=matcher.id, config_hash=matcher.config_hash,
+    """The metadata a table carries, as it reads back (so a cached table compares equal). It names the table's
+    columns, so a table of an older version's columns is no cache hit (its chunks, in those columns too, count as
+    damaged and are scored again: ``schema.chunk_rows``)."""
+    meta = dict(columns=COLUMNS, matcher=matcher.display_name, matcher_id=matcher.id, config_hash=matcher.config_hash,
                 config=matcher.cfg.hashed_dict(), frameset_fingerprint=fs.fingerprint,
                 frameset_name=fs.manifest.get("name", ""), split=split or "all",
                 shard=str(shard) if shard else None, default_sigma=matcher.default_sigma,
