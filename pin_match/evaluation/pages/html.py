@@ -92,6 +92,18 @@ def table(df: pd.DataFrame, caption: str = "") -> Markup:
     return Markup("<table>{}<thead><tr>{}</tr></thead><tbody>{}</tbody></table>").format(cap, head, body)
 
 
+def csv_section(path: Path, index_col: str, title: str, anchor: str, note: str,
+                readable: Callable[[pd.DataFrame], pd.DataFrame]) -> list[Markup]:
+    """A report page's section showing a CSV the report wrote (``readable`` gives its headers; the sigma it was read
+    at, its ``sigma`` and ``sigma_source`` columns, the caption): a heading, how to read it, the table; nothing
+    where the report wrote no such file."""
+    if not Path(path).exists():
+        return []
+    df = pd.read_csv(path, index_col=index_col, keep_default_na=False, na_values=[""])
+    sigma = f"sigma {df['sigma'].iloc[0]:g} ({df['sigma_source'].iloc[0]})" if "sigma" in df else ""
+    return [heading(title, 2, anchor), paragraph(note, "note"), table(readable(df), sigma)]
+
+
 def image(src: str, alt: str, width: int | None = None) -> Markup:
     """An image from a relative path (quoted here: pass the path as it is on disk)."""
     size = Markup(' width="{}"').format(int(width)) if width else ""

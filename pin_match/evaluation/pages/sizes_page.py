@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pandas as pd
 from markupsafe import Markup
 
 from pin_match.evaluation.core.sizes import BAND_EDGES, readable
@@ -25,10 +24,5 @@ NOTE = ("Each frame is put in a band by the pixel area of the object that decide
 
 def sizes_section(path: Path) -> list[Markup]:
     """The section for ``ReportFiles.sizes`` (``path``): a heading, how to read it, the table; nothing if absent."""
-    if not Path(path).exists():
-        return []
-    table = pd.read_csv(path, index_col="band", keep_default_na=False, na_values=[""])
-    sigma = f"sigma {table['sigma'].iloc[0]:g} ({table['sigma_source'].iloc[0]})" if "sigma" in table else ""
-    return [html.heading("By the objects' size", 2, "sizes"),
-            html.paragraph(NOTE.format(", ".join(f"{edge:,}" for edge in BAND_EDGES)), "note"),
-            html.table(readable(table), sigma)]
+    return html.csv_section(path, "band", "By the objects' size", "sizes",
+                            NOTE.format(", ".join(f"{edge:,}" for edge in BAND_EDGES)), readable)

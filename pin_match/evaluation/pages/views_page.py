@@ -8,7 +8,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import pandas as pd
 from markupsafe import Markup
 
 from pin_match.evaluation.core.views import NONE_NAMED, readable
@@ -22,9 +21,4 @@ NOTE = ("The matcher compared each candidate box with the target's reference vie
 
 def views_section(path: Path) -> list[Markup]:
     """The section for ``ReportFiles.views`` (``path``): a heading, how to read it, the table; nothing if absent."""
-    if not Path(path).exists():
-        return []
-    table = pd.read_csv(path, index_col="view")
-    sigma = f"sigma {table['sigma'].iloc[0]:g} ({table['sigma_source'].iloc[0]})" if "sigma" in table else ""
-    return [html.heading("Which reference view matched", 2, "views"), html.paragraph(NOTE.format(NONE_NAMED), "note"),
-            html.table(readable(table), sigma)]
+    return html.csv_section(path, "view", "Which reference view matched", "views", NOTE.format(NONE_NAMED), readable)
