@@ -20,14 +20,7 @@ from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
-from pin_match.scoring.schema import (
-    COLUMNS,
-    TARGETS,
-    as_stored,
-    chunk_notes,
-    decode_meta,
-    encode_meta,
-)
+from pin_match.scoring.schema import COLUMNS, TARGETS, as_stored, chunk_notes, decode_meta, encode_meta
 from pin_match.scoring.table import ScoreTable, ScoreTableError, table_in
 
 
