@@ -11,7 +11,6 @@ from test_navigation import table_of, walk_set  # noqa: F401 (walk_set: a fixtur
 from test_policies import scored_episodes
 
 from pin_match.evaluation.core.metrics import frame_arrays
-from pin_match.evaluation.core.policies import policy_metrics
 from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     HouseStop,
@@ -21,6 +20,7 @@ from pin_match.evaluation.core.stop import (
     found_frames,
     gated_scores,
     house_level,
+    policy_metrics,
 )
 from pin_match.evaluation.pages.stop_page import stop_html, stop_table
 

@@ -253,7 +253,7 @@ def test_bench_passes_its_tuned_choice_in_memory_and_a_default_run_leaves_no_sta
                                                                                             monkeypatch):
     from pin_match.evaluation.core.analysis import load_bench
     from pin_match.evaluation.flows import bench as bench_module
-    from pin_match.evaluation.flows.bench import bench
+    from pin_match.evaluation.flows.bench import SigmaRule, bench
     from pin_match.scoring import RunOptions
 
     ctx, run = EvalContext(tiny_frameset, Bootstrap(n_boot=10)), RunOptions(workers=1, progress=False)
@@ -263,6 +263,6 @@ def test_bench_passes_its_tuned_choice_in_memory_and_a_default_run_leaves_no_sta
     assert reads == []  # the tuned sigma is not read back from its file
     path = tuned.run.layout.thresholds("color")
     assert json.loads(path.read_text())["sigma"] == tuned.run.tuned["color"]["sigma"] == tuned.results[0]["sigma"]
-    untuned = bench(ctx, ["color"], tmp_path, sigma_from="default", run=run)
+    untuned = bench(ctx, ["color"], tmp_path, sigma=SigmaRule("default"), run=run)
     assert not path.exists() and untuned.run.tuned == {}  # an earlier run's file is not this run's
     assert load_bench(tmp_path, tiny_frameset).tuned == {}

@@ -62,9 +62,9 @@ def _cmd_tune(a: argparse.Namespace) -> None:
     if a.policy is None:
         result = tune(table, fs, objective=a.objective, split=a.split)
     else:
-        from pin_match.evaluation.core.policies import StopPolicy, tune_policy
+        from pin_match.evaluation.core.policies import tune_policy
 
-        result = tune_policy(table, fs, StopPolicy.parse(a.policy), objective=a.objective, split=a.split)
+        result = tune_policy(table, fs, _policy(a), objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
     policy = f", stop policy {result['policy']}" if "policy" in result else ""
     print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
@@ -80,7 +80,7 @@ def _cmd_report(a: argparse.Namespace) -> None:
     table = _table(a, fs)
     out = a.out or cache_dir(outputs.REPORTS, table.matcher_id, fs.fingerprint) / str(a.split)
     result = report(table, EvalContext(fs, Bootstrap(n_boot=a.bootstrap)), out, sigma=a.threshold,
-                    thresholds=a.thresholds, split=a.split)
+                    thresholds=a.thresholds, split=a.split, policy=_policy(a))
     m = result["metrics"]
     print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "
           f"%Match {_fmt(m.get('match_pct'))}  TM {_fmt(m.get('tm_pct'))}  CM {_fmt(m.get('cm_pct'))}  "
@@ -106,13 +106,13 @@ def _cmd_similarity(a: argparse.Namespace) -> None:
 
 def _cmd_bench(a: argparse.Namespace) -> None:
     from pin_match.evaluation.core.tables import markdown_table
-    from pin_match.evaluation.flows.bench import bench
+    from pin_match.evaluation.flows.bench import SigmaRule, bench
     from pin_match.evaluation.flows.compare import compare_bench
     from pin_match.evaluation.flows.index_page import SetResults, write_index
 
     overrides = bench_overrides(a.cfg, a.matcher)
     with engine_run(a) as run:
-        done = bench(a.frameset, overrides, a.out, objective=a.objective, sigma_from=a.sigma_from, run=run)
+        done = bench(a.frameset, overrides, a.out, sigma=SigmaRule(a.sigma_from, a.objective, _policy(a)), run=run)
     print(markdown_table(done.joint))
     comparisons = compare_bench(done.run)
     if comparisons:
@@ -268,11 +268,23 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--split", default="train",
                    help="split to tune on (default train; tuning on the split you report is optimistic)")
     s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
-    s.add_argument("--policy", metavar="POLICY",
-                   help="tune for this stop policy: K-of-N (found when K of the last N frames are above sigma) or "
-                        "house:topT+MARGIN (above sigma and the mean of the T highest earlier scores of the episode "
-                        "plus MARGIN); default 1-of-1, PIN's rule; docs/metrics.md, 'Stop policies'")
+    _policy_argument(s, "tune for this stop policy")
     s.set_defaults(func=_cmd_tune)
+
+
+def _policy_argument(s: argparse.ArgumentParser, what: str) -> None:
+    s.add_argument("--policy", metavar="POLICY",
+                   help=f"{what}: K-of-N (found when K of the last N frames are above sigma), house:topT+MARGIN "
+                        "(above sigma and the mean of the T highest earlier scores of the episode plus MARGIN) or "
+                        "look:W[+CLEAR] (after the first firing look W more frames, then commit to the best "
+                        "candidate; look:rest is the whole walk, an upper bound); default 1-of-1, PIN's rule; "
+                        "docs/metrics.md, 'Stop policies'")
+
+
+def _policy(a: argparse.Namespace):
+    from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
+
+    return FIRST_MATCH if a.policy is None else StopPolicy.parse(a.policy)
 
 
 def _add_report(sub: argparse._SubParsersAction) -> None:
@@ -288,6 +300,7 @@ def _add_report(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
     s.add_argument("--out", type=Path,
                    help=f"report folder (default {outputs.REPORTS}/<matcher@hash>/<fingerprint>/<split>)")
+    _policy_argument(s, "read the navigation estimate and what the agent commits to under this stop policy")
     s.set_defaults(func=_cmd_report)
 
 
@@ -314,6 +327,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     add_bench_config(s)
     add_run_options(s, workers=WORKERS_HELP)
     add_scheduler(s)
+    _policy_argument(s, "tune sigma for and report under this stop policy")
     s.set_defaults(func=_cmd_bench)
 
 

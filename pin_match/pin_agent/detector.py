@@ -12,12 +12,21 @@ The agent hands over one square at a time. A square is one crop under both crop 
 ``pin_match.contract.crops`` (``pin`` and ``whole`` alike), so the matcher scores exactly the square the
 agent shows it, and the frame's verdict (either square matched) is the agent's own max over
 its two squares.
+
+Under a stop policy other than PIN's first match (``policy="look:20"``: look 20 more steps after the
+first firing, then commit to the best candidate) the detector runs the policy itself, with the same
+code as the offline estimate (``StopPolicy.decide`` on the steps so far): a step's score is the
+best of its squares, every map is empty until the policy commits, and at the step where it does,
+``committed`` names the candidate's step, score and per-square maps (the last square's call returns
+that square's map of the candidate). The agent places the goal from the candidate's own frame: it
+keeps the depth and pose of the last ``window`` steps.
 """
 
 from __future__ import annotations
 
 import hashlib
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -29,10 +38,23 @@ from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Mat
 from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
+from pin_match.evaluation.core.stop import FIRST_MATCH, LookFurther, StopPolicy, one_walk
 
 
 class PinAgentError(PinMatchError, ValueError):
     """The agent called the detector out of order or with inputs PIN never produces."""
+
+
+@dataclass(frozen=True)
+class Commit:
+    """The candidate a stop policy committed to: its step (0-based since ``reset``), its score (the best of its
+    squares), each square's map at sigma (in the order the agent passed them) and the step where the policy
+    committed."""
+
+    step: int
+    score: float
+    maps: tuple[torch.Tensor, ...]
+    at_step: int
 
 
 class PinDetector:
@@ -45,7 +67,8 @@ class PinDetector:
     """
 
     def __init__(self, matcher: str | Matcher, *, sigma: float | None = None, thresholds: str | Path | None = None,
-                 resize_dim: int | None = 224, **matcher_cfg: Any) -> None:
+                 resize_dim: int | None = 224, policy: str | StopPolicy = FIRST_MATCH, squares_per_step: int = 2,
+                 **matcher_cfg: Any) -> None:
         if isinstance(matcher, Matcher):
             if matcher_cfg:
                 raise ConfigError(f"PinDetector: config keys {sorted(matcher_cfg)} go with a matcher name, not with "
@@ -62,13 +85,22 @@ class PinDetector:
         if thresholds is not None:
             _check_tuned_for(thresholds, matcher)
         self.resize_dim = resize_dim
+        self.policy = StopPolicy.parse(policy) if isinstance(policy, str) else policy
+        if isinstance(self.policy, LookFurther) and self.policy.upper_bound:
+            raise PinAgentError(f"stop policy {self.policy} reads where the recording ends, which an agent does not "
+                                "know: give the detector a window (look:W)")
+        if squares_per_step < 1:
+            raise PinAgentError(f"squares_per_step={squares_per_step}: PIN passes 2 squares a step")
+        self.squares_per_step = squares_per_step
         self.last_result: MatchResult | None = None
+        self.committed: Commit | None = None
         self._episode_open = False
         self._prepared = False
+        self._steps: list[list[MatchResult]] = []
 
     @classmethod
     def from_cow_config(cls, cow: Mapping[str, Any], device: Any = None) -> PinDetector:
-        """From the ``cow`` section of a PIN config: matcher, thresholds or sigma, resize_dim, matcher_cfg."""
+        """From the ``cow`` section of a PIN config: matcher, thresholds or sigma, resize_dim, policy, matcher_cfg."""
         if cow.get("matcher") is None:
             raise ConfigError("cow.matcher: name the pin_match matcher (e.g. effnet) when cow.method is pin_match")
         matcher_cfg = {key: tuple(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
@@ -76,7 +108,7 @@ class PinDetector:
         if device is not None:
             matcher_cfg.setdefault("device", str(device))
         return cls(str(cow["matcher"]), sigma=cow.get("sigma"), thresholds=cow.get("thresholds"),
-                   resize_dim=cow.get("resize_dim", 224), **matcher_cfg)
+                   resize_dim=cow.get("resize_dim", 224), policy=cow.get("policy") or FIRST_MATCH, **matcher_cfg)
 
     @property
     def sigma(self) -> float:
@@ -91,6 +123,8 @@ class PinDetector:
         self._episode_open = True
         self._prepared = False
         self.last_result = None
+        self.committed = None
+        self._steps = []
 
     def forward(self, obs: Any, references: Any, category: Sequence[str] | None = None) -> torch.Tensor:
         """Map of the square ``obs`` (H x W float32, CPU): 1.0 at ``points_at(sigma)``, all zero below sigma."""
@@ -102,7 +136,28 @@ class PinDetector:
             self.matcher.prepare(episode_target(references, category, self.matcher))
             self._prepared = True
         self.last_result = self.matcher.match(image)
-        return points_map(self.last_result.points_at(self.sigma), image.shape[0], image.shape[1])
+        square_map = points_map(self.last_result.points_at(self.sigma), image.shape[0], image.shape[1])
+        if self.policy == FIRST_MATCH:
+            return square_map
+        return self._under_policy(square_map)
+
+    def _under_policy(self, square_map: torch.Tensor) -> torch.Tensor:
+        """Keep the square's result; after a step's last square, ask the policy whether it commits now."""
+        if not self._steps or len(self._steps[-1]) == self.squares_per_step:
+            self._steps.append([])
+        self._steps[-1].append(self.last_result)  # type: ignore[arg-type]  # set by forward
+        empty = torch.zeros_like(square_map)
+        if self.committed is not None or len(self._steps[-1]) < self.squares_per_step:
+            return empty
+        scores = np.array([max(r.score for r in step) for step in self._steps])
+        decision = self.policy.decide(one_walk(scores), self.sigma, walk_goes_on=True)[0]
+        if decision.stop is None:
+            return empty
+        chosen = self._steps[decision.chosen]  # type: ignore[index]  # a committed decision names its candidate
+        maps = tuple(points_map(r.points_at(self.sigma), *square_map.shape) for r in chosen)
+        self.committed = Commit(int(decision.chosen), float(scores[decision.chosen]), maps,  # type: ignore[arg-type]
+                                len(scores) - 1)
+        return maps[-1]
 
     __call__ = forward  # PIN calls its detector as a module: self.clip_module(square, references, category=...)
 

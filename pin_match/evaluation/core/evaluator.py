@@ -19,6 +19,7 @@ import pandas as pd
 
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.core.commits import commit_metrics, commitments
 from pin_match.evaluation.core.intervals import bootstrap_ci, instance_clusters
 from pin_match.evaluation.core.labels import frame_labels, localisation_hits, scored_frames
 from pin_match.evaluation.core.metrics import (
@@ -32,6 +33,7 @@ from pin_match.evaluation.core.metrics import (
 )
 from pin_match.evaluation.core.navigation import Placements, episodes_at, navigation_metrics
 from pin_match.evaluation.core.sigma import SigmaChoice, way_out
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, describe
 from pin_match.scoring.table import ScoreTable
 
 
@@ -125,12 +127,15 @@ class Evaluation:
     frames: pd.DataFrame
     arrays: FrameArrays
     walks: pd.DataFrame | None = None  # per episode, where the agent stopped (``navigation``); None without geometry
+    policy: StopPolicy = FIRST_MATCH  # the stop policy the navigation estimate and the commitments are read under
+    commits: pd.DataFrame | None = None  # per episode, what the policy committed to (``commits``); None for PIN's rule
 
 
-def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice,
-             split: str | None = "val") -> Evaluation:
+def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice, split: str | None = "val",
+             policy: StopPolicy = FIRST_MATCH) -> Evaluation:
     """Metrics (with CIs and localisation), the navigation estimate where the frame-set has geometry, and the
-    per-category table of one split at one sigma."""
+    per-category table of one split at one sigma. The frame metrics read sigma alone; the navigation estimate,
+    and for a policy other than PIN's rule what it committed to per episode (``commits``), read ``policy``."""
     ctx = EvalContext.of(data)
     scored, arr = ctx.scored(table, split), ctx.arrays(table, split)
     metrics = detection_metrics(arr, sigma.value)
@@ -139,16 +144,22 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
     ci95 = bootstrap_ci(arr, sigma.value, clusters=ctx.clusters, boot=ctx.boot)
     walks, navigation = None, {"missing": ctx.fs.navigation_missing}
     if navigation["missing"] is None:
-        walks = episodes_at(ctx.placements(table, split), sigma.value)
+        walks = episodes_at(ctx.placements(table, split), sigma.value, policy)
         estimate = navigation_metrics(walks, ctx.clusters, ctx.boot)
         metrics.update(estimate.pop("metrics"))
         ci95.update(estimate.pop("ci95"))
-        navigation = {"policy": "first match at sigma (1-of-1)", **estimate}
+        navigation = {"policy": describe(policy), **estimate}
+    commits = None
+    if policy != FIRST_MATCH:
+        commits = commitments(arr, sigma.value, policy)
+        committed = commit_metrics(commits, ctx.clusters, ctx.boot)
+        metrics.update(committed["metrics"])
+        ci95.update(committed["ci95"])
     result = dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                   modality=table.meta.get("modality"), frameset_fingerprint=ctx.fs.fingerprint, split=split or "all",
-                  **sigma.as_dict(), metrics=metrics, ci95=ci95, navigation=navigation, n_bootstrap=ctx.boot.n_boot,
-                  date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
-    return Evaluation(result, per_category(arr, sigma.value), scored, arr, walks)
+                  **sigma.as_dict(), policy=str(policy), metrics=metrics, ci95=ci95, navigation=navigation,
+                  n_bootstrap=ctx.boot.n_boot, date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
+    return Evaluation(result, per_category(arr, sigma.value), scored, arr, walks, policy, commits)
 
 
 def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:

@@ -12,7 +12,7 @@ set of resamples everywhere. Definitions: docs/metrics.md, "Confidence intervals
 from __future__ import annotations
 
 import math
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -52,6 +52,21 @@ def episode_weights(codes: np.ndarray, boot: Bootstrap) -> Iterator[np.ndarray]:
     for _ in range(boot.n_boot):
         drawn = np.bincount(rng.integers(0, n_units, n_units), minlength=n_units).astype(np.float64)
         yield drawn[codes]
+
+
+def per_episode_intervals(rows: pd.DataFrame, measure: Callable[[pd.DataFrame, np.ndarray | None], dict[str, float]],
+                          clusters: Clusters | None, boot: Bootstrap) -> tuple[dict[str, float], dict]:
+    """A per-episode table's measures (``measure(rows, weights)``, each episode counted ``weights`` times; None:
+    once) and their percentile intervals over resampled units (an interval None where every resample is
+    undefined)."""
+    point = measure(rows, None)
+    codes = unit_codes(list(rows["episode_id"]), clusters)
+    drawn = [measure(rows, w) for w in episode_weights(codes, boot)] if len(rows) else []
+    ci = {}
+    for key in point:
+        low, high = percentile_interval(np.array([d[key] for d in drawn]), boot.level) if drawn else (math.nan,) * 2
+        ci[key] = None if math.isnan(low) else [low, high]
+    return point, ci
 
 
 def percentile_interval(values: np.ndarray, level: float) -> tuple[float, float]:

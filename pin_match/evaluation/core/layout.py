@@ -50,6 +50,7 @@ class ReportFiles:
     navigation_curves: Path
     sizes: Path  # the figures per band of the objects' pixel area (``sizes.size_table``)
     views: Path  # frames per reference view their best box matched (``views.view_table``); where the matcher names any
+    commits: Path  # what the stop policy committed to per episode (``commits.commitments``); for a policy but PIN's
     page: Path
 
     @classmethod
@@ -60,7 +61,7 @@ class ReportFiles:
                    score_distributions=folder / "score_distributions.png",
                    per_category_plot=folder / "per_category.png", navigation=folder / "navigation.csv",
                    navigation_curves=folder / "navigation_curves.png", sizes=folder / "sizes.csv",
-                   views=folder / "views.csv", page=folder / REPORT_PAGE)
+                   views=folder / "views.csv", commits=folder / "commits.csv", page=folder / REPORT_PAGE)
 
 
 @dataclass(frozen=True)

@@ -27,9 +27,9 @@ import pandas as pd
 from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import EpisodeGeometry, Geometry
 from pin_match.errors import PinMatchError
-from pin_match.evaluation.core.intervals import Clusters, episode_weights, percentile_interval, unit_codes
+from pin_match.evaluation.core.intervals import Clusters, per_episode_intervals
 from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, found_frames
+from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy, episode_bounds
 
 SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
 FORWARD_STEP = 0.25  # metres per forward action
@@ -41,7 +41,7 @@ NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
                    "landed_on", "point_x", "point_y", "point_z", "d2g", "path", "geodesic", "spl", "steps",
-                   "unplaced_firings"]
+                   "unplaced_firings", "fired_step", "candidates"]
 
 
 class NavigationError(PinMatchError, ValueError):
@@ -132,43 +132,45 @@ def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
 
 
 def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
-    """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts."""
+    """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts.
+    The policy decides (``StopPolicy.decide``) with a candidate placeable where its points at the frame's line have
+    depth in range; the agent walks from where it stopped looking to the committed candidate's point."""
     arr = places.arrays
-    fired, line = found_frames(arr, sigma, policy), policy.line(arr, sigma)  # line: sigma, or the policy's per frame
-    matched = arr.score >= line
-    rows = []
-    starts = np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(arr.score) else np.zeros(0, np.int64)
-    for start, end in zip(starts, np.r_[starts[1:], len(arr.score)]):
-        rows.append(_episode(places, line, int(start), int(end), fired, matched))
+    line = policy.line(arr, sigma)  # sigma, or the policy's per frame
+    placed: dict[int, tuple[np.ndarray, str] | None] = {}
+
+    def placeable(frame: int) -> bool:
+        if frame not in placed:
+            placed[frame] = places.place(places.frame_ids[frame], float(line[frame]))
+        return placed[frame] is not None
+
+    decisions = policy.decide(arr, sigma, placeable)
+    rows = [_episode(places, decision, start, end, placed)
+            for (start, end), decision in zip(episode_bounds(arr), decisions)]
     return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
 
 
-def _episode(places: Placements, line: np.ndarray, start: int, end: int, fired: np.ndarray,
-             matched: np.ndarray) -> dict:
+def _episode(places: Placements, decision: Decision, start: int, end: int,
+             placed: dict[int, tuple[np.ndarray, str] | None]) -> dict:
     episode_id = str(places.arrays.episode_ids[places.arrays.episode[start]])
     geometry = places.geometry.episodes[episode_id]
     target_id = places.target[episode_id]
-    target = np.asarray(geometry.positions[target_id])
-    unplaced = 0
-    for t in np.flatnonzero(fired[start:end]) + start:
-        seen = np.flatnonzero(matched[start:t + 1])  # the goal comes from the latest matched frame of the window
-        source = start + int(seen[-1]) if seen.size else t
-        placed = places.place(places.frame_ids[source], float(line[source]))
-        if placed is None:
-            unplaced += 1
-            continue
-        return _stop(places, geometry, episode_id, target_id, int(t), int(source), placed) | \
-            {"unplaced_firings": unplaced}
+    if decision.chosen is not None:
+        return _stop(places, geometry, episode_id, target_id, decision, placed[decision.chosen])  # type: ignore[arg-type]
     last = end - 1
+    target = np.asarray(geometry.positions[target_id])
     position = np.r_[places.xy[last], places.geometry.pose(places.frame_ids[last]).z]
     return dict(episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None,
                 stop_step=None, point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None,
                 d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]),
-                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]), unplaced_firings=unplaced)
+                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]),
+                unplaced_firings=decision.unplaced, fired_step=None, candidates=0)
 
 
-def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, t: int, source: int,
+def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
           placed: tuple[np.ndarray, str]) -> dict:
+    """The walk from where the agent stopped looking (``decision.stop``) straight to the committed point."""
+    t, source = int(decision.stop), int(decision.chosen)  # type: ignore[arg-type]  # a committed decision
     point, landed_on = placed
     target = np.asarray(geometry.positions[target_id])
     d2g = float(np.linalg.norm(point - target))
@@ -189,7 +191,8 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
                 stop_frame_id=str(places.frame_ids[t]), stop_step=int(places.steps[t]),
                 point_frame_id=str(places.frame_ids[source]), landed_on=landed_on, point_x=float(point[0]),
                 point_y=float(point[1]), point_z=float(point[2]), d2g=d2g, path=path, geodesic=geodesic, spl=spl,
-                steps=steps)
+                steps=steps, unplaced_firings=decision.unplaced, fired_step=int(places.steps[int(decision.fired)]),
+                candidates=len(decision.candidates))
 
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
@@ -213,13 +216,7 @@ def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dic
 def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,
                        boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """``metrics_of`` with percentile intervals resampling target instances (``clusters``), as every other metric."""
-    point = metrics_of(episodes)
-    codes = unit_codes(list(episodes["episode_id"]), clusters)
-    drawn = [metrics_of(episodes, w) for w in episode_weights(codes, boot)] if len(episodes) else []
-    ci = {}
-    for key in point:
-        low, high = percentile_interval(np.array([d[key] for d in drawn]), boot.level) if drawn else (math.nan,) * 2
-        ci[key] = None if math.isnan(low) else [low, high]
+    point, ci = per_episode_intervals(episodes, metrics_of, clusters, boot)
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(episodes),
                 outcomes={o: int((episodes["outcome"] == o).sum()) for o in OUTCOMES})
 

@@ -11,7 +11,6 @@ equals today's metrics exactly. Definitions: docs/metrics.md, "Stop policies".
 from __future__ import annotations
 
 import datetime as dt
-import math
 from dataclasses import replace
 
 import numpy as np
@@ -19,16 +18,15 @@ import pandas as pd
 
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.evaluator import EvalContext
-from pin_match.evaluation.core.metrics import (
-    COUNT_KEYS,
-    METRIC_KEYS,
-    FrameArrays,
-    Scored,
-    as_arrays,
-    threshold_metrics,
-    to_python,
+from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, Scored, as_arrays, threshold_metrics, to_python
+from pin_match.evaluation.core.stop import (
+    FIRST_MATCH,
+    StopPolicy,
+    fired_arrays,
+    found_frames,
+    gated_scores,
+    policy_metrics,
 )
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, found_frames, gated_scores
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tuning import (
     DEFAULT_MATCH_FLOOR,
@@ -39,41 +37,17 @@ from pin_match.evaluation.core.tuning import (
 )
 from pin_match.scoring.table import ScoreTable
 
-MAX_CANDIDATES = 2000  # sigmas tried for a windowed policy (n > 1): every distinct score, or this many quantiles
-
-
-def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
-    """PIN's counts and metrics with "matched" read as "the policy fires", plus frames to the first firing.
-
-    ``frames_to_first_match``: the mean, over episodes where the policy fires, of the 1-based
-    position of the first frame where it does (NaN when it never fires).
-    """
-    arr = as_arrays(scored)
-    found = found_frames(arr, sigma, policy)
-    out = threshold_metrics(fired_arrays(arr, found), 0.5)
-    first = np.flatnonzero(found)
-    if first.size:
-        first = first[np.r_[True, arr.episode[first][1:] != arr.episode[first][:-1]]]
-        starts = np.searchsorted(arr.episode, arr.episode[first])
-        out["frames_to_first_match"] = float(np.mean(first - starts + 1))
-    else:
-        out["frames_to_first_match"] = math.nan
-    return out
-
-
-def fired_arrays(arr: FrameArrays, found: np.ndarray) -> FrameArrays:
-    """``arr`` with each frame's score replaced by 1 where the policy fires and 0 elsewhere: every metric at 0.5 (and
-    every interval, ``intervals.bootstrap_ci``) then reads "matched" as "found"."""
-    return replace(arr, score=found.astype(np.float64))
+MAX_CANDIDATES = 2000  # sigmas tried where one sweep cannot serve: every distinct score, or this many quantiles
 
 
 def policy_sweep(scored: Scored, policy: StopPolicy) -> pd.DataFrame:
     """Every count and threshold metric of ``policy_metrics`` at every distinct score as sigma (ascending): the table
     ``tuning.choose_sigma`` reads. A 1-of-1 window is one sorted sweep of the gated scores (``stop.gated_scores``),
-    read at every distinct score; a longer window applies each sigma in turn, at most ``MAX_CANDIDATES`` of them."""
+    read at every distinct score; a longer window or a look-further policy applies each sigma in turn, at most
+    ``MAX_CANDIDATES`` of them."""
     arr = as_arrays(scored)
     scores = np.unique(arr.score)
-    if policy.n == 1:
+    if policy.one_sweep:
         gated = replace(arr, score=gated_scores(arr, policy))
         curve = sweep(gated)
         never = pd.DataFrame([{"sigma": np.inf, **threshold_metrics(gated, np.inf)}])  # above every gated score

@@ -108,6 +108,8 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
 def tuned_choice(result: dict, where: str) -> SigmaChoice:
     """The choice a tuning result (``tuning.tune``'s, or its file's content) makes; ``where`` says where it is."""
     how = f"{result.get('objective')} on {result.get('split')}" if result.get("objective") else "tuned"
+    if result.get("policy") not in (None, "1-of-1"):
+        how += f" for {result['policy']}"
     return SigmaChoice(float(result["sigma"]), f"tuned: {how}", f"tuned ({how}), {where}")
 
 

@@ -6,30 +6,58 @@ reaches into the previous episode). PIN's rule is 1-of-1 with the line at sigma.
 ``HouseStop`` raises each frame's line to the house's own level plus a margin: the level is the
 mean of the highest scores of the episode's earlier frames, the objects this agent saw in this
 house before (look-alikes included), so the decision is relative to the house and causal (frame t
-reads only frames before it). ``found_frames`` is the one entry point every reader uses
-(``policies`` for PIN's metrics, ``navigation`` for the walk, ``carry`` across houses);
-``episode_stops`` says per episode where the line was and why. Definitions: docs/metrics.md,
-"Stop policies".
+reads only frames before it). A ``LookFurther`` policy does not commit at its first firing: it
+walks on for a window of frames, remembers every candidate it sees and commits to the best one,
+because within a house the target outscores its look-alikes far more reliably than one sigma
+separates them across houses.
+
+``decide`` is what every policy answers, per episode: where the window opened, where the agent
+stopped looking, which frame it committed to and the candidates it weighed (``Decision``), given
+which candidates can be placed in the house (the navigation estimate says; without geometry every
+one can). ``found_frames`` (the frames where the policy fires, or for a look-further policy the one
+frame it commits to) is what PIN's metrics read (``policy_metrics``, ``carry``); ``navigation``
+reads the decisions; ``episode_stops`` says per episode where the line was and why.
+Definitions: docs/metrics.md, "Stop policies".
 """
 
 from __future__ import annotations
 
+import math
 import re
-from dataclasses import dataclass, field
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.labels import CLASSES, TM
-from pin_match.evaluation.core.metrics import FrameArrays
+from pin_match.evaluation.core.metrics import FrameArrays, Scored, as_arrays, threshold_metrics
 
 
 class PolicyError(PinMatchError, ValueError):
     """A stop policy that does not make sense."""
 
 
-POLICY_SYNTAX = "K-of-N (e.g. 2-of-3) or house:topT+MARGIN (e.g. house:top3+0.1)"
+POLICY_SYNTAX = ("K-of-N (e.g. 2-of-3), house:topT+MARGIN (e.g. house:top3+0.1) or look:W[+CLEAR] / look:rest "
+                 "(e.g. look:20, look:20+0.1)")
+
+Placeable = Callable[[int], bool]  # can the candidate of this frame (an index into the arrays) be placed?
+
+
+@dataclass(frozen=True)
+class Decision:
+    """One episode under a policy, as indices into the arrays (None: it never commits). ``fired``: the first firing
+    whose candidate could be placed, where the agent starts weighing candidates; ``stop``: the frame where it stops
+    looking and commits (``fired`` itself for every policy but a look-further one); ``chosen``: the frame whose
+    candidate it commits to (the latest counted frame of the firing window); ``candidates``: every candidate frame
+    it weighed, in walk order; ``unplaced``: firings passed over because their candidate could not be placed."""
+
+    fired: int | None
+    stop: int | None
+    chosen: int | None
+    candidates: tuple[int, ...] = ()
+    unplaced: int = 0
 
 
 @dataclass(frozen=True)
@@ -51,6 +79,8 @@ class StopPolicy:
         """A policy from its text (``str`` of a policy gives it back): ``POLICY_SYNTAX``."""
         if text.strip().startswith("house:"):
             return HouseStop.parse(text)
+        if text.strip().startswith("look:"):
+            return LookFurther.parse(text)
         found = re.fullmatch(r"\s*(\d+)\s*-?of-?\s*(\d+)\s*", text)
         if not found:
             raise PolicyError(f"stop policy {text!r}: write it as {POLICY_SYNTAX}")
@@ -80,6 +110,38 @@ class StopPolicy:
         episode_start = starts[np.searchsorted(starts, index, side="right") - 1] if len(index) else index
         window_start = np.maximum(index - self.n + 1, episode_start)
         return counted[index + 1] - counted[window_start] >= self.k
+
+    @property
+    def one_sweep(self) -> bool:
+        """Is the policy at every sigma one sorted sweep of its gated scores (``gated_scores``)? A 1-of-1 window is."""
+        return self.n == 1
+
+    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
+        """Per frame: is it one PIN's metrics count as matched under the policy? Every frame where it fires."""
+        return self.fires(arr, sigma)
+
+    def decide(self, arr: FrameArrays, sigma: float, placeable: Placeable | None = None,
+               walk_goes_on: bool = False) -> list[Decision]:
+        """One ``Decision`` per episode (in ``arr``'s order). ``placeable(i)``: can frame i's candidate be placed in
+        the house (None: every one can, as without geometry)? A firing whose candidate cannot is passed over.
+        ``walk_goes_on``: the frames are the walk so far (an agent deciding live), so a window that reaches past the
+        last frame is still open: no commit yet (``stop`` and ``chosen`` None, ``fired`` set)."""
+        fired = self.fires(arr, sigma)
+        source = latest_counted(arr, self.counted(arr, sigma))
+        return [self._decide(arr.score, fired, source, (start, end), placeable, walk_goes_on)
+                for start, end in episode_bounds(arr)]
+
+    def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
+                placeable: Placeable | None, walk_goes_on: bool) -> Decision:
+        """The first firing of frames ``start:end`` whose candidate can be placed; the agent commits there."""
+        start, end = bounds
+        unplaced = 0
+        for t in np.flatnonzero(fired[start:end]) + start:
+            candidate = int(source[t])
+            if placeable is None or placeable(candidate):
+                return Decision(int(t), int(t), candidate, (candidate,), unplaced)
+            unplaced += 1
+        return Decision(None, None, None, (), unplaced)
 
 
 @dataclass(frozen=True)
@@ -117,6 +179,129 @@ class HouseStop(StopPolicy):
         return np.nan_to_num(self.level(arr), nan=-np.inf) + self.margin
 
 
+@dataclass(frozen=True)
+class LookFurther(StopPolicy):
+    """Look before committing: after the first firing (a frame that fires and whose candidate can be placed) the
+    agent walks on for ``window`` more frames of its walk (None: to the walk's end, an upper bound that knows where
+    the recording stops), remembers each candidate it sees (a firing frame's, placeable), and commits to the
+    highest-scoring one (the first among equals) at the window's last frame, then walks back to it. With ``clear``
+    it commits at once to a candidate that beats every earlier frame of the episode by ``clear`` (the window's first
+    candidate included). Nothing after the frame where it commits is read. ``window=0`` is the base rule."""
+
+    window: int | None = field(default=20, kw_only=True)
+    clear: float | None = field(default=None, kw_only=True)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.window is not None and self.window < 0:
+            raise PolicyError(f"stop policy {self}: need a window of 0 frames or more")
+        if self.clear is not None and not (math.isfinite(self.clear) and self.clear >= 0):
+            raise PolicyError(f"stop policy {self}: need a finite clear margin of 0 or more")
+
+    def __str__(self) -> str:
+        window = "rest" if self.window is None else str(self.window)
+        clear = "" if self.clear is None else f"+{self.clear:g}"
+        base = "" if (self.k, self.n) == (1, 1) else f"@{self.k}-of-{self.n}"
+        return f"look:{window}{clear}{base}"
+
+    @classmethod
+    def parse(cls, text: str) -> LookFurther:
+        found = re.fullmatch(r"\s*look:(\d+|rest)(?:\+(\d*\.?\d+(?:e[+-]?\d+)?))?(?:@(\d+)-of-(\d+))?\s*", text)
+        if not found:
+            raise PolicyError(f"stop policy {text!r}: write a look-further one as look:W (W more frames after the "
+                              "first firing, e.g. look:20), look:W+CLEAR (commit at once to a candidate that beats "
+                              "every earlier frame by CLEAR, e.g. look:20+0.1) or look:rest (the whole walk, an upper "
+                              "bound); optionally @K-of-N")
+        k, n = (int(found.group(3)), int(found.group(4))) if found.group(3) else (1, 1)
+        window = None if found.group(1) == "rest" else int(found.group(1))
+        return cls(k, n, window=window, clear=None if found.group(2) is None else float(found.group(2)))
+
+    @property
+    def upper_bound(self) -> bool:
+        """Does it read where the recording ends (the rest of the walk), which no agent knows?"""
+        return self.window is None
+
+    @property
+    def one_sweep(self) -> bool:
+        return False
+
+    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
+        """The one frame per episode it commits to."""
+        mask = np.zeros(len(arr.score), bool)
+        mask[[d.chosen for d in self.decide(arr, sigma) if d.chosen is not None]] = True
+        return mask
+
+    def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
+                placeable: Placeable | None, walk_goes_on: bool) -> Decision:
+        first = super()._decide(scores, fired, source, bounds, placeable, walk_goes_on)
+        if first.fired is None:
+            return first
+        start, end = bounds
+        last = end - 1 if self.window is None else min(first.fired + self.window, end - 1)
+        still_open = walk_goes_on and (self.window is None or first.fired + self.window > end - 1)
+        before = np.r_[-np.inf, np.maximum.accumulate(scores[start:end])[:-1]]  # best score of the earlier frames
+
+        def clears(frame: int) -> bool:
+            return self.clear is not None and bool(scores[frame] >= before[frame - start] + self.clear)
+
+        chosen, candidates, unplaced = first.chosen, [first.chosen], first.unplaced
+        if clears(chosen):
+            return Decision(first.fired, first.fired, chosen, (chosen,), unplaced)
+        for t in np.flatnonzero(fired[first.fired + 1:last + 1]) + first.fired + 1:
+            candidate = int(source[t])
+            if candidate in candidates:
+                continue
+            if placeable is not None and not placeable(candidate):
+                unplaced += 1
+                continue
+            candidates.append(candidate)
+            if scores[candidate] > scores[chosen]:
+                chosen = candidate
+            if clears(candidate):
+                return Decision(first.fired, int(t), candidate, tuple(candidates), unplaced)
+        if still_open:
+            return Decision(first.fired, None, None, tuple(candidates), unplaced)
+        return Decision(first.fired, last, chosen, tuple(candidates), unplaced)
+
+
+def one_walk(scores: np.ndarray) -> FrameArrays:
+    """One episode's scores alone, as an agent deciding live knows them (no labels): all ``decide`` reads."""
+    n = len(scores)
+    return FrameArrays(score=np.asarray(scores, np.float64), cls=np.zeros(n, np.int8), episode=np.zeros(n, np.int64),
+                       seen=np.zeros(n, np.int8), seen_known=False, episode_ids=np.array(["walk"]),
+                       categories=np.array([""]))
+
+
+def describe(policy: StopPolicy) -> str:
+    """The policy in a phrase a page or a table caption can say."""
+    if isinstance(policy, LookFurther):
+        window = "to the walk's end (an upper bound)" if policy.upper_bound else f"{policy.window} more frames"
+        clear = "" if policy.clear is None else f", committing at once to one that beats every earlier frame by " \
+            f"{policy.clear:g}"
+        base = "first match" if (policy.k, policy.n) == (1, 1) else f"{policy.k} of {policy.n} frames"
+        return (f"{policy}: from the first {base} at sigma it looks {window}, then commits to the best candidate"
+                f"{clear}")
+    if policy == FIRST_MATCH:
+        return "first match at sigma (1-of-1)"
+    return str(policy)
+
+
+def episode_bounds(arr: FrameArrays) -> list[tuple[int, int]]:
+    """(first index, one past the last) of each episode of ``arr`` (ordered by episode and step)."""
+    starts = episode_starts(arr)
+    return [(int(a), int(b)) for a, b in zip(starts, np.r_[starts[1:], len(arr.score)])]
+
+
+def latest_counted(arr: FrameArrays, counted: np.ndarray) -> np.ndarray:
+    """Per frame, the index of the latest counted frame of its episode up to it (-1 where none): the candidate a
+    firing window stands for, the frame its goal is placed from."""
+    index = np.where(counted, np.arange(len(counted)), -1)
+    out = np.full(len(counted), -1, np.int64)
+    for start, end in episode_bounds(arr):
+        out[start:end] = np.maximum.accumulate(index[start:end]) if end > start else index[start:end]
+    return out
+
+
 def episode_starts(arr: FrameArrays) -> np.ndarray:
     """Index of each episode's first frame (``arr`` is ordered by episode and step)."""
     return np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(arr.score) else np.zeros(0, np.int64)
@@ -139,16 +324,23 @@ def house_level(arr: FrameArrays, top: int) -> np.ndarray:
 
 
 def found_frames(arr: FrameArrays, sigma: float, policy: StopPolicy) -> np.ndarray:
-    """Per frame (in ``arr``'s order): does the policy fire there? The one entry point of every reader."""
-    return policy.fires(arr, sigma)
+    """Per frame (in ``arr``'s order): is it found under the policy (``StopPolicy.found``)? What PIN's metrics read."""
+    return policy.found(arr, sigma)
+
+
+def fired_arrays(arr: FrameArrays, found: np.ndarray) -> FrameArrays:
+    """``arr`` with each frame's score replaced by 1 where the policy found it and 0 elsewhere: every metric at 0.5
+    (and every interval, ``intervals.bootstrap_ci``) then reads "matched" as "found"."""
+    return replace(arr, score=found.astype(np.float64))
 
 
 def gated_scores(arr: FrameArrays, policy: StopPolicy) -> np.ndarray:
     """Each frame's score where it reaches the policy's bar, -inf where it never counts: for a 1-of-1 window the
     policy fires at sigma exactly where this is at or above sigma (any finite sigma), so one sorted sweep serves
     every sigma."""
-    if policy.n != 1:
-        raise PolicyError(f"stop policy {policy}: a window of {policy.n} frames is not one gated score a frame")
+    if not policy.one_sweep:
+        what = "a look-further policy" if isinstance(policy, LookFurther) else f"a window of {policy.n} frames"
+        raise PolicyError(f"stop policy {policy}: {what} is not one gated score a frame")
     return np.where(arr.score >= policy.bar(arr), arr.score, -np.inf)
 
 
@@ -156,31 +348,56 @@ FIRST_MATCH = StopPolicy()  # PIN's own rule (1-of-1), the default of every ``po
 DEFAULT_POLICY = FIRST_MATCH  # what a report explains: the leave-one-set-out measurement kept PIN's rule
 
 
+def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
+    """PIN's counts and metrics with "matched" read as "found under the policy", plus how long it looked.
+
+    ``frames_to_first_match``: the mean, over episodes where something is found, of the 1-based position of the
+    first found frame (for a look-further policy, the frame it commits to); ``frames_looked_at``: the mean 1-based
+    position of the frame where the agent stopped looking and committed (the same for every policy but a
+    look-further one). NaN where nothing is found.
+    """
+    arr = as_arrays(scored)
+    found = found_frames(arr, sigma, policy)
+    out = threshold_metrics(fired_arrays(arr, found), 0.5)
+    first = np.flatnonzero(found)
+    if first.size:
+        first = first[np.r_[True, arr.episode[first][1:] != arr.episode[first][:-1]]]
+        out["frames_to_first_match"] = float(np.mean(first - np.searchsorted(arr.episode, arr.episode[first]) + 1))
+    else:
+        out["frames_to_first_match"] = math.nan
+    stops = [(d.stop, start) for d, (start, _) in zip(policy.decide(arr, sigma), episode_bounds(arr))
+             if d.stop is not None]
+    out["frames_looked_at"] = float(np.mean([stop - start + 1 for stop, start in stops])) if stops else math.nan
+    return out
+
+
 STOP_COLUMNS = ["episode_id", "first_step", "first_class", "first_score", "stop_step", "stop_class", "stop_score",
-                "stop_level", "stop_line", "peak_step", "peak_score", "peak_level", "peak_offset"]
+                "stop_level", "stop_line", "commit_step", "chosen_step", "chosen_class", "chosen_score", "candidates",
+                "peak_step", "peak_score", "peak_level", "peak_offset"]
 
 
 def episode_stops(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFrame:
     """Per episode (``STOP_COLUMNS``): PIN's first match at sigma (step: the frame's 0-based position in its episode,
-    class, score); where the policy stopped, the house's level there (``policy.level``, NaN without one) and the line
-    the frame reached; and the target's best frame: its score, the level before it and how far above it the target
-    came (its offset). None where there is no such frame."""
+    class, score); where the policy fired (the window opened, ``Decision.fired``), the house's level there
+    (``policy.level``, NaN without one) and the line the frame reached; where it stopped looking (``commit_step``),
+    the frame it committed to and every candidate it weighed (``step:score``, ``;``-separated); and the target's best
+    frame: its score, the level before it and how far above it the target came (its offset). None where there is no
+    such frame."""
     level, line = policy.level(arr), policy.line(arr, sigma)
-    first, fired = arr.score >= sigma, found_frames(arr, sigma, policy)
+    first = arr.score >= sigma
     target = arr.cls == TM
     rows = []
-    starts = episode_starts(arr)
-    for start, end in zip(starts, np.r_[starts[1:], len(arr.score)]):
+    for (start, end), decision in zip(episode_bounds(arr), policy.decide(arr, sigma)):
         row = dict(episode_id=str(arr.episode_ids[arr.episode[start]]))
-        for name, mask in (("first", first), ("stop", fired)):
-            hit = np.flatnonzero(mask[start:end])
-            t = start + int(hit[0]) if hit.size else None
-            row |= {f"{name}_step": None if t is None else t - start,
-                    f"{name}_class": None if t is None else CLASSES[arr.cls[t]],
-                    f"{name}_score": None if t is None else float(arr.score[t])}
-            if name == "stop":
-                row |= dict(stop_level=None if t is None else _number(level[t]),
-                            stop_line=None if t is None else float(line[t]))
+        hit = np.flatnonzero(first[start:end])
+        row |= _frame_fields(arr, "first", start + int(hit[0]) if hit.size else None, start)
+        t = decision.fired
+        row |= _frame_fields(arr, "stop", t, start)
+        row |= dict(stop_level=None if t is None else _number(level[t]),
+                    stop_line=None if t is None else float(line[t]),
+                    commit_step=None if decision.stop is None else decision.stop - start)
+        row |= _frame_fields(arr, "chosen", decision.chosen, start)
+        row["candidates"] = "; ".join(f"{c - start}:{arr.score[c]:.3f}" for c in decision.candidates) or None
         seen = np.flatnonzero(target[start:end])
         t = start + int(seen[np.argmax(arr.score[start:end][seen])]) if seen.size else None
         row |= dict(peak_step=None if t is None else t - start, peak_score=None if t is None else float(arr.score[t]),
@@ -188,6 +405,12 @@ def episode_stops(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.Data
                     peak_offset=None if t is None else _number(arr.score[t] - level[t]))
         rows.append(row)
     return pd.DataFrame(rows, columns=STOP_COLUMNS)
+
+
+def _frame_fields(arr: FrameArrays, name: str, t: int | None, start: int) -> dict:
+    if t is None:
+        return {f"{name}_step": None, f"{name}_class": None, f"{name}_score": None}
+    return {f"{name}_step": t - start, f"{name}_class": CLASSES[arr.cls[t]], f"{name}_score": float(arr.score[t])}
 
 
 def _number(value: float) -> float | None:

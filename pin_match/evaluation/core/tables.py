@@ -24,8 +24,12 @@ TABLE_COLUMNS = [("match_pct", "%Match", 2), ("tm_pct", "TM", 2), ("cm_pct", "CM
 # then the share of episodes where the agent never stopped; only where the frame-set has geometry
 NAVIGATION_COLUMNS = [("sr", "SR", 2), ("spl", "SPL", 2), ("ce", "CE", 2), ("d2g", "D2G", 2), ("steps", "Steps", 1),
                       ("not_found_pct", "Not found", 2)]
+# what a stop policy other than PIN's rule committed to (``commits``): % of episodes committed to the target and to a
+# look-alike, and the frames looked at before committing; only where a row has them
+COMMIT_COLUMNS = [("commit_target_pct", "Commit T", 2), ("commit_lookalike_pct", "Commit C", 2),
+                  ("frames_looked_at", "Looked", 1)]
 CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
-ALL_COLUMNS = [*NAVIGATION_COLUMNS, *CATEGORY_COLUMNS]
+ALL_COLUMNS = [*NAVIGATION_COLUMNS, *COMMIT_COLUMNS, *CATEGORY_COLUMNS]
 SIGMA_FROM = "sigma from"
 
 
@@ -40,8 +44,11 @@ class Row:
 
 
 def report_row(result: dict) -> Row:
-    """The row of a ``report`` / ``evaluate`` result (its metrics at the reported sigma)."""
-    return Row(result["matcher_id"], result["sigma"], result["sigma_source"], result["metrics"])
+    """The row of a ``report`` / ``evaluate`` result (its metrics at the reported sigma); a stop policy other than
+    PIN's rule is named after the matcher."""
+    policy = result.get("policy", "1-of-1")
+    name = result["matcher_id"] if policy == "1-of-1" else f"{result['matcher_id']} {policy}"
+    return Row(name, result["sigma"], result["sigma_source"], result["metrics"])
 
 
 def tuning_row(result: dict) -> Row:
@@ -52,8 +59,10 @@ def tuning_row(result: dict) -> Row:
 
 def side_by_side(rows: Sequence[Row]) -> pd.DataFrame:
     """The paper's table: one row per matcher (sigma, where it came from, then the metrics), NaN = undefined; the
-    navigation columns first where any row has them (a frame-set with geometry)."""
-    columns = [*NAVIGATION_COLUMNS, *TABLE_COLUMNS] if any("sr" in r.metrics for r in rows) else TABLE_COLUMNS
+    navigation columns first where any row has them (a frame-set with geometry), then what a stop policy committed
+    to where any row has it."""
+    columns = [*(NAVIGATION_COLUMNS if any("sr" in r.metrics for r in rows) else []),
+               *(COMMIT_COLUMNS if any("commit_target_pct" in r.metrics for r in rows) else []), *TABLE_COLUMNS]
     data = {}
     for r in rows:
         data[r.name] = {"sigma": r.sigma, SIGMA_FROM: r.sigma_source,

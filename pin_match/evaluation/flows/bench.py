@@ -2,7 +2,7 @@
 
 This is the toolkit's main job (``pin-match demo`` runs it on each of its sets: ``demo``).
 By default sigma is tuned on the train split and applied to val, never tuned on val;
-``sigma_from`` can name another tuning split, "default" (each matcher's default), "paper"
+``SigmaRule.source`` can name another tuning split, "default" (each matcher's default), "paper"
 (``paper_thresholds.json``, package data) or a thresholds file (a ``Path``: a table of sigmas by
 matcher id, such as the demo's shipped ones). Whatever the choice, every row of every table says it.
 """
@@ -24,7 +24,9 @@ from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.analysis import BenchRun
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.layout import BenchLayout
+from pin_match.evaluation.core.policies import tune_policy
 from pin_match.evaluation.core.sigma import SigmaChoice, load_threshold, resolve_sigma, tuned_choice
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
 from pin_match.evaluation.core.tables import latex_table, markdown_table, report_row, side_by_side, sigma_caption
 from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE, tune, write_thresholds
 from pin_match.evaluation.flows.report import report
@@ -72,6 +74,16 @@ class Stopwatch:
 
 
 @dataclass(frozen=True)
+class SigmaRule:
+    """How a bench sets each matcher's sigma: tuned on the split ``source`` for ``objective`` under ``policy`` (the stop
+    policy the reports then read), or ``source`` "default", "paper" or a thresholds file (a ``Path``)."""
+
+    source: str | Path = "train"
+    objective: str = DEFAULT_OBJECTIVE
+    policy: StopPolicy = FIRST_MATCH
+
+
+@dataclass(frozen=True)
 class Bench:
     """What ``bench`` wrote: the joint table, each matcher's report, and the folder as ``load_bench`` would read it
     (the matchers in the order they were benched, so ``compare_bench`` compares each with the first)."""
@@ -86,15 +98,16 @@ class Bench:
 
 
 def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | Mapping[str, dict],
-          out: str | Path | BenchLayout, *, sigma_from: str | Path = "train", objective: str = DEFAULT_OBJECTIVE,
-          run: RunOptions = DEFAULT_RUN, watch: Stopwatch | None = None) -> Bench:
+          out: str | Path | BenchLayout, *, sigma: SigmaRule = SigmaRule(), run: RunOptions = DEFAULT_RUN,
+          watch: Stopwatch | None = None) -> Bench:
     """Run every matcher through score -> sigma -> report (val); write the joint tables under ``out``.
 
     ``matchers``: names, or a mapping of name to config overrides. ``data``: the frame-set, or the
     run's ``EvalContext`` (its labels, built once for every matcher, and bootstrap options). All
     matchers are scored first, together in one pass over the frames (one bar: each frame decoded once,
     a part several matchers share run once), then tuned and reported (one bar). ``watch`` collects
-    the seconds of each step, with the number of frames scored.
+    the seconds of each step, with the number of frames scored. ``sigma``: where each sigma comes from, and
+    the stop policy it is tuned for and the reports read (PIN's first match by default).
     """
     from tqdm import tqdm
 
@@ -103,6 +116,7 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
         get_matcher_class(name)
     ctx = EvalContext.of(data)
     splits = sorted(set(ctx.fs.episodes.split))
+    sigma_from = sigma.source
     tuning = not isinstance(sigma_from, Path) and sigma_from not in ("default", "paper")
     if tuning and sigma_from not in splits:
         raise BenchError(f"frame-set {ctx.fs.root} has no {sigma_from!r} split to tune sigma on (it has {splits}): "
@@ -118,8 +132,9 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     with watch.step("tune + report"):
         for name in tqdm(configs, desc="tune + report", unit="matcher", disable=not run.progress,
                          dynamic_ncols=True):
-            choice, tuned[name] = _choose(tables[name], ctx, sigma_from, objective, layout.thresholds(name))
-            results.append(report(tables[name], ctx, layout.report(name), sigma=choice, split=REPORT_SPLIT))
+            choice, tuned[name] = _choose(tables[name], ctx, sigma, layout.thresholds(name))
+            results.append(report(tables[name], ctx, layout.report(name), sigma=choice, split=REPORT_SPLIT,
+                                  policy=sigma.policy))
         rows = [report_row(r) for r in results]
         joint = side_by_side(rows)
         caption = sigma_caption(rows, REPORT_SPLIT)
@@ -132,16 +147,18 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     return Bench(joint, results, run_loaded)
 
 
-def _choose(table: ScoreTable, ctx: EvalContext, sigma_from: str | Path, objective: str,
+def _choose(table: ScoreTable, ctx: EvalContext, rule: SigmaRule,
             threshold_file: Path) -> tuple[SigmaChoice, dict | None]:
     """The sigma applied, and the tuning result when it was tuned (written to ``threshold_file`` for the record,
     passed on in memory). Without tuning, a thresholds file an earlier run left there is removed: it would be
     read back as this run's."""
+    sigma_from, objective, policy = rule.source, rule.objective, rule.policy
     if isinstance(sigma_from, Path) or sigma_from in ("default", "paper"):
         threshold_file.unlink(missing_ok=True)
         if sigma_from == "default":
             return resolve_sigma(table.matcher_id, table.meta.get("default_sigma")), None
         return load_threshold(sigma_from, table.matcher_id), None
-    result = tune(table, ctx, objective=objective, split=sigma_from)
+    result = tune(table, ctx, objective=objective, split=sigma_from) if policy == FIRST_MATCH else \
+        tune_policy(table, ctx, policy, objective=objective, split=sigma_from)
     write_thresholds(result, threshold_file)
     return tuned_choice(result, f"tuned on {ctx.fs.root}, written to {threshold_file}"), result

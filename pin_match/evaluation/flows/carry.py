@@ -35,8 +35,8 @@ from pin_match.evaluation.core.metrics import (
     threshold_metrics,
 )
 from pin_match.evaluation.core.navigation import Placements, episodes_at, metrics_of
-from pin_match.evaluation.core.policies import fired_arrays, policy_sigma
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, found_frames
+from pin_match.evaluation.core.policies import policy_sigma
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, fired_arrays, found_frames
 from pin_match.evaluation.core.tuning import sigma_for
 
 

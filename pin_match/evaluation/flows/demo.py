@@ -29,7 +29,7 @@ from pin_match.data.synth.size import SynthSize
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.layout import BenchLayout
-from pin_match.evaluation.flows.bench import Bench, Stopwatch, bench
+from pin_match.evaluation.flows.bench import Bench, SigmaRule, Stopwatch, bench
 from pin_match.evaluation.flows.compare import compare_bench
 from pin_match.evaluation.flows.index_page import SetResults, write_index
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
@@ -104,7 +104,8 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
         timer = watch.within(s.name)
         fs = _load_or_make(here.frameset, seed, timer, lambda path, s=s: s.build(path, seed, run))
         shipped = None if tune else shipped_sigmas(s, fs)
-        done = bench(EvalContext(fs), s.matchers, here, sigma_from=shipped or "train", run=run, watch=timer)
+        done = bench(EvalContext(fs), s.matchers, here, sigma=SigmaRule(shipped or "train"), run=run,
+                     watch=timer)
         if shipped is None:
             write_sigmas_to_ship(done, fs, here.root / SIGMAS_TO_SHIP)
         with timer.step("compare"):

@@ -21,6 +21,7 @@ from pin_match.evaluation.core.layout import ReportFiles
 from pin_match.evaluation.core.navigation import navigation_sweep, sweep_sigmas
 from pin_match.evaluation.core.sigma import SigmaChoice, resolve_sigma
 from pin_match.evaluation.core.sizes import best_point_hits, readable, size_table
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tables import latex_table, markdown_table, report_tables
 from pin_match.evaluation.core.views import view_table
@@ -36,19 +37,21 @@ from pin_match.scoring.table import ScoreTable
 
 def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path, *,
            sigma: float | SigmaChoice | None = None, thresholds: str | Path | None = None,
-           split: str | None = "val") -> dict:
+           split: str | None = "val", policy: StopPolicy = FIRST_MATCH) -> dict:
     """Evaluate at one sigma and write the report folder; returns metrics.json's content plus ``files``.
 
     ``data``: the frame-set, or the run's ``EvalContext`` (its labels and bootstrap options).
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
     or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
+    ``policy``: the stop policy the navigation estimate, its curves and the page's account of each stop read (a
+    policy but PIN's rule also writes what it committed to per episode, commits.csv).
     ``files``: each file written, by its name in ``ReportFiles`` (``{"metrics": ".../metrics.json", ...}``; the
     navigation files only where the frame-set has geometry).
     """
     ctx = EvalContext.of(data)
     choice = sigma if isinstance(sigma, SigmaChoice) else \
         resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
-    evaluation = evaluate(table, ctx, choice, split)
+    evaluation = evaluate(table, ctx, choice, split, policy)
     result = evaluation.result
     files = ReportFiles.in_folder(out_dir)
     atomic.write_text(files.per_category, evaluation.per_category.to_csv(index_label="category"))
@@ -67,13 +70,16 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     plot_sigma_curves(sweep(evaluation.arrays), choice.value, files.sigma_curves, title)
     plot_score_distributions(evaluation.arrays, choice.value, files.score_distributions, title)
     plot_per_category(evaluation.per_category, files.per_category_plot, title)
-    for stale in (files.navigation, files.navigation_curves, files.views):
+    for stale in (files.navigation, files.navigation_curves, files.views, files.commits):
         stale.unlink(missing_ok=True)
+    if evaluation.commits is not None:
+        atomic.write_text(files.commits, evaluation.commits.assign(sigma=choice.value, policy=str(policy)).to_csv(
+            index=False))
     if views is not None:
         atomic.write_text(files.views, views.assign(sigma=choice.value, sigma_source=choice.source).to_csv())
     if evaluation.walks is not None:
         atomic.write_text(files.navigation, evaluation.walks.to_csv(index=False))
-        curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score))
+        curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score), policy)
         plot_navigation_curves(curve, choice.value, files.navigation_curves, title)
     write_report_page(files, table, ctx.fs, evaluation)
     # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)

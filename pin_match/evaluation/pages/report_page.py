@@ -116,10 +116,10 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
         return [*parts, html.paragraph(f"Not estimated: {nav['missing']}.", "note")]
     m, ci = evaluation.result["metrics"], evaluation.result["ci95"]
     lines = [f"{name} {_value(m.get(key))}{_interval(ci.get(key))}" for key, name in NAVIGATION_NAMES]
-    parts += [html.paragraph("The recorded walk is followed until the policy (" + nav["policy"] + ") fires on a frame "
-                             "whose matched points have depth in PIN's 0.5-5 m; the agent then walks to their median "
-                             "point and stops. Exploration after a missed target is not simulated (docs/metrics.md, "
-                             "'Navigation').", "note"),
+    parts += [html.paragraph("The recorded walk is followed until the policy (" + nav["policy"] + ") commits to a "
+                             "frame whose matched points have depth in PIN's 0.5-5 m; the agent then walks from where "
+                             "it committed to their median point and stops. Exploration after a missed target is not "
+                             "simulated (docs/metrics.md, 'Navigation').", "note"),
               html.paragraph("; ".join(lines) + f" over {nav['n_episodes']} episodes: " +
                              ", ".join(f"{n} {o}" for o, n in nav["outcomes"].items()) + ".")]
     figures = []
@@ -130,7 +130,9 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
                                             f"{w.unplaced_firings} firings without depth in range"], "miss"))
             continue
         image = frame_image(assets, fs, w.point_frame_id, frame_points(table, w.point_frame_id, sigma))
-        caption += [f"stop at step {w.stop_step}, goal from frame {w.point_frame_id}",
+        looked = "" if w.fired_step == w.stop_step else \
+            f"fired at step {w.fired_step}, looked on to step {w.stop_step} ({w.candidates} candidates), "
+        caption += [f"{looked}stop at step {w.stop_step}, goal from frame {w.point_frame_id}",
                     f"point on: {w.landed_on}, {w.d2g:.2f} m from the target", f"{w.steps} steps, SPL {w.spl:.2f}"]
         figures.append(html.figure([image], caption, "hit" if w.outcome == "success" else "miss"))
     return [*parts, html.gallery(figures)]
@@ -165,7 +167,7 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
     parts += sizes_section(files.sizes)
     parts += views_section(files.views)
     parts += navigation_html(fs, table, evaluation, sigma, assets)
-    parts += stop_html(evaluation.arrays, sigma)
+    parts += stop_html(evaluation.arrays, sigma, evaluation.policy)
     cohorts = target_cohorts(table)
     parts += scale_html(fs, cohorts, evaluation, sigma, assets)
     for section in sections(evaluation.frames, sigma, cap):

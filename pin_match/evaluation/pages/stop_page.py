@@ -2,8 +2,10 @@
 
 A reader who sees a house-relative policy stop late (or never) needs the house's level at that
 frame, the line it made and how far above the house the target itself came; a reader of PIN's
-rule needs the same table with the line at sigma. ``stop_html`` returns the pieces a page adds
-(``report_page`` places them); the numbers come from ``stop.episode_stops``, nothing is computed here.
+rule needs the same table with the line at sigma; a reader of a look-further policy needs the
+candidates it weighed in its window, their scores and the one it committed to. ``stop_html``
+returns the pieces a page adds (``report_page`` places them); the numbers come from
+``stop.episode_stops``, nothing is computed here.
 """
 
 from __future__ import annotations
@@ -14,7 +16,7 @@ import pandas as pd
 from markupsafe import Markup
 
 from pin_match.evaluation.core.metrics import FrameArrays
-from pin_match.evaluation.core.stop import DEFAULT_POLICY, HouseStop, StopPolicy, episode_stops
+from pin_match.evaluation.core.stop import DEFAULT_POLICY, HouseStop, LookFurther, StopPolicy, describe, episode_stops
 from pin_match.evaluation.pages import html
 
 
@@ -38,12 +40,21 @@ def stop_table(stops: pd.DataFrame, sigma: float, policy: StopPolicy) -> pd.Data
             "house level there": s.stop_level, "line there": s.stop_line, "why": _why(s, sigma, policy),
             "target's best": _frame(s.peak_step, "TM" if _known(s.peak_step) else None, s.peak_score),
             "house level before it": s.peak_level, "target's offset": s.peak_offset}
+        if isinstance(policy, LookFurther):
+            rows[s.episode_id] |= {
+                "candidates (step:score)": s.candidates or "none",
+                "committed at step": "never" if not _known(s.commit_step) else int(s.commit_step),
+                "committed to": _frame(s.chosen_step, s.chosen_class, s.chosen_score)}
     table = pd.DataFrame.from_dict(rows, orient="index")
     table.index.name = "episode"
     return table
 
 
 def _rule(policy: StopPolicy, sigma: float) -> str:
+    if isinstance(policy, LookFurther):
+        return (f"Policy {describe(policy)}. Sigma {sigma:g}. 'stop' is the firing that opened the window; the "
+                "candidates are the firing frames it weighed until it committed, and the agent walks back to the one "
+                "it committed to (its steps and path are counted).")
     window = "" if (policy.k, policy.n) == (1, 1) else f"; it stops when {policy.k} of the last {policy.n} frames do"
     if isinstance(policy, HouseStop):
         return (f"Policy {policy}: a frame counts when its score reaches sigma ({sigma:g}) and the house's level plus "
