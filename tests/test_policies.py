@@ -8,9 +8,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from pin_match.evaluation.core.commits import policy_metrics
 from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, frame_arrays, threshold_metrics
 from pin_match.evaluation.core.policies import policy_sigma, policy_sweep, tune_policy
-from pin_match.evaluation.core.stop import FIRST_MATCH, HouseStop, PolicyError, StopPolicy, found_frames, policy_metrics
+from pin_match.evaluation.core.stop import FIRST_MATCH, HouseStop, PolicyError, StopPolicy, found_frames
 from pin_match.evaluation.core.tuning import sigma_for
 
 

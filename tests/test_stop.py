@@ -10,17 +10,16 @@ import pytest
 from test_navigation import table_of, walk_set  # noqa: F401 (walk_set: a fixture used below)
 from test_policies import scored_episodes
 
+from pin_match.evaluation.core.commits import episode_stops, policy_metrics
 from pin_match.evaluation.core.metrics import frame_arrays
 from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     HouseStop,
     PolicyError,
     StopPolicy,
-    episode_stops,
     found_frames,
     gated_scores,
     house_level,
-    policy_metrics,
 )
 from pin_match.evaluation.pages.stop_page import stop_html, stop_table
 

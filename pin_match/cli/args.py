@@ -110,3 +110,20 @@ def add_dataclass_flags(s: argparse.ArgumentParser, cls: type, choices: dict[str
 def dataclass_values(a: argparse.Namespace, cls: type) -> Any:
     """The dataclass built from the flags of ``add_dataclass_flags``."""
     return cls(**{f.name: getattr(a, f.name) for f in dataclasses.fields(cls)})
+
+
+def policy_argument(s: argparse.ArgumentParser, what: str) -> None:
+    """``--policy``: one stop policy, ``what`` saying what it is for."""
+    s.add_argument("--policy", metavar="POLICY",
+                   help=f"{what}: K-of-N (found when K of the last N frames are above sigma), house:topT+MARGIN "
+                        "(above sigma and the mean of the T highest earlier scores of the episode plus MARGIN) or "
+                        "look:W[+CLEAR] (after the first firing look W more frames, then commit to the best "
+                        "candidate; look:rest is the whole walk, an upper bound); default 1-of-1, PIN's rule; "
+                        "docs/metrics.md, 'Stop policies'")
+
+
+def policy_of(a: argparse.Namespace):
+    """The stop policy of ``--policy`` (PIN's first match without one)."""
+    from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
+
+    return FIRST_MATCH if a.policy is None else StopPolicy.parse(a.policy)

@@ -21,6 +21,8 @@ from pin_match.cli.args import (
     bench_overrides,
     engine_run,
     matcher_overrides,
+    policy_argument,
+    policy_of,
 )
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
@@ -64,7 +66,7 @@ def _cmd_tune(a: argparse.Namespace) -> None:
     else:
         from pin_match.evaluation.core.policies import tune_policy
 
-        result = tune_policy(table, fs, _policy(a), objective=a.objective, split=a.split)
+        result = tune_policy(table, fs, policy_of(a), objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
     policy = f", stop policy {result['policy']}" if "policy" in result else ""
     print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
@@ -80,7 +82,7 @@ def _cmd_report(a: argparse.Namespace) -> None:
     table = _table(a, fs)
     out = a.out or cache_dir(outputs.REPORTS, table.matcher_id, fs.fingerprint) / str(a.split)
     result = report(table, EvalContext(fs, Bootstrap(n_boot=a.bootstrap)), out, sigma=a.threshold,
-                    thresholds=a.thresholds, split=a.split, policy=_policy(a))
+                    thresholds=a.thresholds, split=a.split, policy=policy_of(a))
     m = result["metrics"]
     print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "
           f"%Match {_fmt(m.get('match_pct'))}  TM {_fmt(m.get('tm_pct'))}  CM {_fmt(m.get('cm_pct'))}  "
@@ -112,7 +114,7 @@ def _cmd_bench(a: argparse.Namespace) -> None:
 
     overrides = bench_overrides(a.cfg, a.matcher)
     with engine_run(a) as run:
-        done = bench(a.frameset, overrides, a.out, sigma=SigmaRule(a.sigma_from, a.objective, _policy(a)), run=run)
+        done = bench(a.frameset, overrides, a.out, sigma=SigmaRule(a.sigma_from, a.objective, policy_of(a)), run=run)
     print(markdown_table(done.joint))
     comparisons = compare_bench(done.run)
     if comparisons:
@@ -183,13 +185,16 @@ def _carry_report(a: argparse.Namespace, configs: dict[str, Matcher], scored: di
     import pandas as pd
 
     from pin_match.evaluation.core.metrics import Bootstrap
+    from pin_match.evaluation.core.stop import FIRST_MATCH
     from pin_match.evaluation.flows.carry import chosen_and_carried, headline, leave_one_out
 
     boot = Bootstrap(n_boot=a.bootstrap)
     walks = any(s.placements is not None for sets in scored.values() for s in sets.values())
     columns = ["set", "auroc_same", "sigma", "match", "cm", "cm_low", "cm_high", "first_precision", "first_success",
                "own_sigma", "own_match", "own_cm", "own_first_precision", "own_first_success", "first_gap",
-               "success_gap", *(["sr", "ce", "own_sr", "own_ce"] if walks else [])]
+               "success_gap", *(["sr", "ce", "own_sr", "own_ce"] if walks else []),
+               *(["commit_target", "commit_lookalike", "looked", "own_commit_target", "commit_gap"]
+                 if any(p != FIRST_MATCH for _, p in variants.values()) else [])]
     report: dict = dict(matcher=a.matcher, variants={label: configs[c].id for label, (c, _) in variants.items()},
                         policies={label: str(p) for label, (_, p) in variants.items()}, rows={})
     with pd.option_context("display.width", 250, "display.max_colwidth", 60):
@@ -268,23 +273,8 @@ def _add_tune(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--split", default="train",
                    help="split to tune on (default train; tuning on the split you report is optimistic)")
     s.add_argument("--out", type=Path, help="thresholds file to write (default thresholds/<matcher>.json)")
-    _policy_argument(s, "tune for this stop policy")
+    policy_argument(s, "tune for this stop policy")
     s.set_defaults(func=_cmd_tune)
-
-
-def _policy_argument(s: argparse.ArgumentParser, what: str) -> None:
-    s.add_argument("--policy", metavar="POLICY",
-                   help=f"{what}: K-of-N (found when K of the last N frames are above sigma), house:topT+MARGIN "
-                        "(above sigma and the mean of the T highest earlier scores of the episode plus MARGIN) or "
-                        "look:W[+CLEAR] (after the first firing look W more frames, then commit to the best "
-                        "candidate; look:rest is the whole walk, an upper bound); default 1-of-1, PIN's rule; "
-                        "docs/metrics.md, 'Stop policies'")
-
-
-def _policy(a: argparse.Namespace):
-    from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
-
-    return FIRST_MATCH if a.policy is None else StopPolicy.parse(a.policy)
 
 
 def _add_report(sub: argparse._SubParsersAction) -> None:
@@ -300,7 +290,7 @@ def _add_report(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")
     s.add_argument("--out", type=Path,
                    help=f"report folder (default {outputs.REPORTS}/<matcher@hash>/<fingerprint>/<split>)")
-    _policy_argument(s, "read the navigation estimate and what the agent commits to under this stop policy")
+    policy_argument(s, "read the navigation estimate and what the agent commits to under this stop policy")
     s.set_defaults(func=_cmd_report)
 
 
@@ -327,7 +317,7 @@ def _add_bench(sub: argparse._SubParsersAction) -> None:
     add_bench_config(s)
     add_run_options(s, workers=WORKERS_HELP)
     add_scheduler(s)
-    _policy_argument(s, "tune sigma for and report under this stop policy")
+    policy_argument(s, "tune sigma for and report under this stop policy")
     s.set_defaults(func=_cmd_bench)
 
 

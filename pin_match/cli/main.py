@@ -13,7 +13,7 @@ import sys
 from pathlib import Path
 
 from pin_match import outputs
-from pin_match.cli import catalog, data, evaluation, fitting, pages, training
+from pin_match.cli import catalog, data, evaluation, fitting, pages, policies, training
 from pin_match.cli.args import (
     add_matcher_config,
     add_run_options,
@@ -141,7 +141,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_synth(sub)
     _add_import(sub)
     _add_score_and_merge(sub)
-    for group in (catalog, data, evaluation, pages, training, fitting):
+    for group in (catalog, data, evaluation, policies, pages, training, fitting):
         group.add_commands(sub)
     return p
 

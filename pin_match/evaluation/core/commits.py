@@ -1,4 +1,5 @@
-"""What a stop policy committed to, episode by episode: the class of the frame it chose and how long it looked.
+"""What a stop policy did, episode by episode: where it fired and committed, the class of the frame it chose, how
+long it looked, and PIN's metrics read through it (``policy_metrics``).
 
 Where a frame-set has no geometry (real photos) there is no walk to follow, but the policy still
 decides which frame the agent would commit to (``StopPolicy.decide``, every candidate placeable).
@@ -16,8 +17,16 @@ import pandas as pd
 
 from pin_match.evaluation.core.intervals import Clusters, per_episode_intervals
 from pin_match.evaluation.core.labels import CLASSES, CM, TM
-from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
-from pin_match.evaluation.core.stop import StopPolicy, episode_bounds
+from pin_match.evaluation.core.metrics import (
+    DEFAULT_BOOT,
+    Bootstrap,
+    FrameArrays,
+    Scored,
+    as_arrays,
+    threshold_metrics,
+    to_python,
+)
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, episode_bounds, fired_arrays, found_frames
 
 COMMIT_COLUMNS = ["episode_id", "committed_step", "committed_class", "committed_score", "fired_step", "commit_step",
                   "looked_frames", "candidates"]
@@ -64,3 +73,72 @@ def commit_metrics(rows: pd.DataFrame, clusters: Clusters | None = None, boot: B
     """``commit_shares`` with percentile intervals resampling target instances (``clusters``), as every metric."""
     point, ci = per_episode_intervals(rows, commit_shares, clusters, boot)
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(rows))
+
+
+def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
+    """PIN's counts and metrics with "matched" read as "found under the policy", plus how long it looked.
+
+    ``frames_to_first_match``: the mean, over episodes where something is found, of the 1-based position of the
+    first found frame (for a look-further policy, the frame it commits to); ``frames_looked_at``: the mean 1-based
+    position of the frame where the agent stopped looking and committed (the same for every policy but a
+    look-further one). NaN where nothing is found.
+    """
+    arr = as_arrays(scored)
+    found = found_frames(arr, sigma, policy)
+    out = threshold_metrics(fired_arrays(arr, found), 0.5)
+    first = np.flatnonzero(found)
+    if first.size:
+        first = first[np.r_[True, arr.episode[first][1:] != arr.episode[first][:-1]]]
+        out["frames_to_first_match"] = float(np.mean(first - np.searchsorted(arr.episode, arr.episode[first]) + 1))
+    else:
+        out["frames_to_first_match"] = math.nan
+    stops = [(d.stop, start) for d, (start, _) in zip(policy.decide(arr, sigma), episode_bounds(arr))
+             if d.stop is not None]
+    out["frames_looked_at"] = float(np.mean([stop - start + 1 for stop, start in stops])) if stops else math.nan
+    return out
+
+
+STOP_COLUMNS = ["episode_id", "first_step", "first_class", "first_score", "stop_step", "stop_class", "stop_score",
+                "stop_level", "stop_line", "commit_step", "chosen_step", "chosen_class", "chosen_score", "candidates",
+                "peak_step", "peak_score", "peak_level", "peak_offset"]
+
+
+def episode_stops(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFrame:
+    """Per episode (``STOP_COLUMNS``): PIN's first match at sigma (step: the frame's 0-based position in its episode,
+    class, score); where the policy fired (the window opened, ``Decision.fired``), the house's level there
+    (``policy.level``, NaN without one) and the line the frame reached; where it stopped looking (``commit_step``),
+    the frame it committed to and every candidate it weighed (``step:score``, ``;``-separated); and the target's best
+    frame: its score, the level before it and how far above it the target came (its offset). None where there is no
+    such frame."""
+    level, line = policy.level(arr), policy.line(arr, sigma)
+    first = arr.score >= sigma
+    target = arr.cls == TM
+    rows = []
+    for (start, end), decision in zip(episode_bounds(arr), policy.decide(arr, sigma)):
+        row = dict(episode_id=str(arr.episode_ids[arr.episode[start]]))
+        hit = np.flatnonzero(first[start:end])
+        row |= _frame_fields(arr, "first", start + int(hit[0]) if hit.size else None, start)
+        t = decision.fired
+        row |= _frame_fields(arr, "stop", t, start)
+        row |= dict(stop_level=None if t is None else _number(level[t]),
+                    stop_line=None if t is None else float(line[t]),
+                    commit_step=None if decision.stop is None else decision.stop - start)
+        row |= _frame_fields(arr, "chosen", decision.chosen, start)
+        row["candidates"] = "; ".join(f"{c - start}:{arr.score[c]:.3f}" for c in decision.candidates) or None
+        seen = np.flatnonzero(target[start:end])
+        t = start + int(seen[np.argmax(arr.score[start:end][seen])]) if seen.size else None
+        row |= dict(peak_step=None if t is None else t - start, peak_score=None if t is None else float(arr.score[t]),
+                    peak_level=None if t is None else _number(level[t]),
+                    peak_offset=None if t is None else _number(arr.score[t] - level[t]))
+        rows.append(row)
+    return pd.DataFrame(rows, columns=STOP_COLUMNS)
+
+
+def _frame_fields(arr: FrameArrays, name: str, t: int | None, start: int) -> dict:
+    if t is None:
+        return {f"{name}_step": None, f"{name}_class": None, f"{name}_score": None}
+    return {f"{name}_step": t - start, f"{name}_class": CLASSES[arr.cls[t]], f"{name}_score": float(arr.score[t])}
+
+
+def _number(value: float) -> float | None:
+    return None if np.isnan(value) else float(value)

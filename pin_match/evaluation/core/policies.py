@@ -17,16 +17,10 @@ import numpy as np
 import pandas as pd
 
 from pin_match.data.frameset import FrameSet
+from pin_match.evaluation.core.commits import policy_metrics
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, Scored, as_arrays, threshold_metrics, to_python
-from pin_match.evaluation.core.stop import (
-    FIRST_MATCH,
-    StopPolicy,
-    fired_arrays,
-    found_frames,
-    gated_scores,
-    policy_metrics,
-)
+from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, fired_arrays, found_frames, gated_scores
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tuning import (
     DEFAULT_MATCH_FLOOR,

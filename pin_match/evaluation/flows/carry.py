@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.core.commits import commit_shares, commitments
 from pin_match.evaluation.core.intervals import bootstrap_ci
 from pin_match.evaluation.core.metrics import (
     DEFAULT_BOOT,
@@ -61,8 +62,8 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
     first-match precision with intervals (target instances resampled), %Match and first-match success (% of all
     episodes whose first match is the target, what sigma is chosen by) at both, so a sigma that keeps CM low by
     matching in few episodes shows; the first-match gaps (own best minus carried, in points, of precision and of
-    success); with ``placements`` (the frames placed in their house) SR and CE at both (else NaN). A metric
-    undefined at a sigma (nothing matched) is NaN."""
+    success); with ``placements`` (the frames placed in their house) SR and CE at both (else NaN); what the policy
+    commits to (``committed_at``). A metric undefined at a sigma (nothing matched) is NaN."""
     arrays = frame_arrays(frames)
     own, at, at_own = readings(arrays, frames, sigma, policy)
     fired = fired_arrays(arrays, found_frames(arrays, sigma, policy))
@@ -71,6 +72,7 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
     low_high = {key: ci[key] or [np.nan, np.nan] for key in ("auroc_same", "cm_pct", "first_match_precision")}
     ranking = ranking_metrics(arrays)
     walk = navigation_at(placements, sigma, policy, own)
+    commit = committed_at(arrays, frames, sigma, policy)
     row = dict(auroc_same=ranking["auroc_same"], auroc_target=ranking["auroc_target"],
                auroc_low=low_high["auroc_same"][0], auroc_high=low_high["auroc_same"][1],
                sigma=sigma, tm=at["tm_pct"], cm=at["cm_pct"], cm_low=low_high["cm_pct"][0],
@@ -78,10 +80,21 @@ def carried(frames: pd.DataFrame, sigma: float, clusters: dict[str, str], boot: 
                first_low=low_high["first_match_precision"][0], first_high=low_high["first_match_precision"][1],
                first_success=at["first_match_success"], own_sigma=own, own_cm=at_own["cm_pct"],
                own_match=at_own["match_pct"], own_first_precision=at_own["first_match_precision"],
-               own_first_success=at_own["first_match_success"], **walk)
+               own_first_success=at_own["first_match_success"], **walk, **commit)
     row = {key: float(value) for key, value in row.items()}
     return dict(row, first_gap=row["own_first_precision"] - row["first_precision"],
                 success_gap=row["own_first_success"] - row["first_success"])
+
+
+def committed_at(arrays: FrameArrays, frames: pd.DataFrame, sigma: float, policy: StopPolicy) -> dict[str, float]:
+    """What ``policy`` commits to at ``sigma`` (% of all episodes: to the target, to a look-alike; frames looked at),
+    and the share committed to the target at the set's own best sigma for the same policy (first-match objective on
+    these frames), with the gap between the two in points."""
+    at = commit_shares(commitments(arrays, sigma, policy))
+    best = commit_shares(commitments(arrays, policy_sigma(frames, policy), policy))
+    return dict(commit_target=at["commit_target_pct"], commit_lookalike=at["commit_lookalike_pct"],
+                looked=at["frames_looked_at"], own_commit_target=best["commit_target_pct"],
+                commit_gap=best["commit_target_pct"] - at["commit_target_pct"])
 
 
 def readings(arrays: FrameArrays, frames: pd.DataFrame, sigma: float,
@@ -182,7 +195,8 @@ def chosen_and_carried(variants: Mapping[str, Mapping[str, ScoredSet]], boot: Bo
 def headline(rows: pd.DataFrame) -> dict:
     """How far a score carries over these rows: the worst CM and its set, the largest first-match precision gap and
     success gap with their sets, the lowest %Match, the mean AUROC-same; where sets have geometry, the lowest SR and
-    the highest CE (NaN where none has)."""
+    the highest CE (NaN where none has); the highest share of episodes committed to a look-alike and the largest
+    gap to the set's own best share committed to the target."""
     ranked = worst_first(rows)
     gaps, success = rows.first_gap.fillna(np.inf), rows.success_gap.fillna(np.inf)
     walks = rows.dropna(subset=["sr"]) if "sr" in rows else rows.iloc[:0]
@@ -192,4 +206,6 @@ def headline(rows: pd.DataFrame) -> dict:
                 largest_success_gap_set=str(rows.set[success.idxmax()]), lowest_match=float(rows.match.min()),
                 mean_auroc_same=float(rows.auroc_same.mean()),
                 lowest_sr=float(walks.sr.min()) if len(walks) else math.nan,
-                highest_ce=float(walks.ce.max()) if len(walks) else math.nan)
+                highest_ce=float(walks.ce.max()) if len(walks) else math.nan,
+                worst_commit_lookalike=float(rows.commit_lookalike.max()),
+                largest_commit_gap=float(rows.commit_gap.max()))

@@ -136,3 +136,39 @@ def plot_per_category(categories: pd.DataFrame, path: str | Path, title: str = "
         ax.legend(fontsize=8)
 
     _figure(Path(path), title, draw)
+
+
+def plot_trade(rows: pd.DataFrame, path: str | Path, title: str = "") -> None:
+    """``flows.trade``'s rows: per matcher, SR, CE, SPL and Steps against the look-further window (where the frame-set
+    has geometry; else the shares committed to the target and to a look-alike and the frames looked at), the rest of
+    the walk drawn apart at the right as the upper bound it is."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    walks = "sr" in rows and rows["sr"].notna().any()
+    panels = (("sr", "SR %"), ("ce", "CE %"), ("spl", "SPL %"), ("steps", "Steps")) if walks else \
+        (("commit_target_pct", "committed to the target %"), ("commit_lookalike_pct", "committed to a look-alike %"),
+         ("frames_looked_at", "frames looked at"))
+    windows = sorted(rows["window"].dropna().unique())
+    rest = (max(windows) if windows else 0) * 1.25 + 5
+    fig, axes = plt.subplots(1, len(panels), figsize=(3.6 * len(panels), 3.6), squeeze=False)
+    try:
+        for ax, (key, label) in zip(axes[0], panels):
+            for name, group in rows.groupby("matcher", sort=False):
+                lines = group[group["window"].notna()].sort_values("window")
+                drawn = ax.plot(lines["window"], lines[key], marker="o", label=name)
+                bound = group[group["upper_bound"]]
+                ax.plot([rest] * len(bound), bound[key], marker="*", linestyle="none", color=drawn[0].get_color())
+            ticks = [*windows, rest]
+            ax.set_xticks(ticks, [f"{w:g}" for w in windows] + ["rest"])
+            ax.set(xlabel="frames looked on after the first firing", ylabel=label)
+        axes[0][0].legend(fontsize=8)
+        if title:
+            _fit_title(fig, title)
+        fig.tight_layout()
+        with atomic.atomic_path(Path(path)) as tmp:
+            fig.savefig(tmp, format="png", dpi=120)
+    finally:
+        plt.close(fig)

@@ -15,8 +15,9 @@ import math
 import pandas as pd
 from markupsafe import Markup
 
+from pin_match.evaluation.core.commits import episode_stops
 from pin_match.evaluation.core.metrics import FrameArrays
-from pin_match.evaluation.core.stop import DEFAULT_POLICY, HouseStop, LookFurther, StopPolicy, describe, episode_stops
+from pin_match.evaluation.core.stop import DEFAULT_POLICY, HouseStop, LookFurther, StopPolicy, describe
 from pin_match.evaluation.pages import html
 
 
