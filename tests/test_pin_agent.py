@@ -443,3 +443,38 @@ def test_depth_out_of_range_markers_become_no_depth(open_recorder, tmp_path):
     folder = recorder.finish_episode()
     stored = np.load(folder / "depth" / "0.npy")
     assert (stored[:20] == 0).all() and np.array_equal(stored[20:], obs["depth"][20:])
+
+
+# ---------------------------------------------------------------------- detector: a stop policy run live
+def test_a_look_further_policy_runs_live_as_offline_on_a_replayed_episode(tiny_frameset):
+    """A recorded walk (the val frames in the order look-alike, other, target, nothing, look-alike) replayed through
+    the detector twice: under PIN's rule to read each step's score (the best of its two squares), then under look:2,
+    which must stay silent until it commits where the offline rule on those scores commits, to its candidate."""
+    from pin_match.evaluation.core.stop import LookFurther, one_walk
+
+    references, captions = pin_references(tiny_frameset, "mug_c")
+    walk = [tiny_frameset.image(f"ep_val_{k:04d}") for k in (1, 2, 0, 3, 1)]
+    pin = PinDetector("color", sigma=0.0)
+    pin.reset()
+    scores = []
+    for rgb in walk:
+        square_scores = []
+        for square in agent_squares(rgb)[1:]:
+            pin(square, references, category=captions)
+            square_scores.append(pin.last_score)
+        scores.append(max(square_scores))
+    sigma = 0.0  # every step fires: the look-alike opens the window, the target (color's only score above 0) wins
+    offline = LookFurther(window=2).decide(one_walk(np.array(scores)), sigma)[0]
+    assert (offline.fired, offline.stop, offline.chosen) == (0, 2, 2) and scores[2] > max(scores[:2])
+    live = PinDetector("color", sigma=sigma, policy="look:2")
+    live.reset()
+    for step, rgb in enumerate(walk):
+        _, top, bottom = agent_squares(rgb)
+        maps = [live(square, references, category=captions) for square in (top, bottom)]
+        if step < offline.stop:
+            assert live.committed is None and not any(m.any() for m in maps)
+    assert (live.committed.step, live.committed.at_step) == (offline.chosen, offline.stop)
+    assert live.committed.score == pytest.approx(scores[offline.chosen])
+    assert live.committed.maps[-1].any() or live.committed.maps[0].any()
+    with pytest.raises(PinAgentError, match="reads where the recording ends"):
+        PinDetector("color", sigma=0.5, policy="look:rest")
