@@ -406,3 +406,29 @@ def test_the_command_line_loads_no_renderer_until_a_set_is_rendered():
     done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert done.returncode == 0, done.stderr
     assert done.stdout.strip() == "False" and "pybullet build time" not in done.stderr
+
+
+def test_score_takes_several_matchers_in_one_pass_and_refuses_a_repeat(tiny_frameset, tmp_path, capsys, monkeypatch):
+    """Issue 60.3: two --matcher options write both tables from one pass, each the bytes of scoring it alone."""
+    import pandas as pd
+
+    from pin_match.data.frameset import FrameSet
+
+    decoded = []
+    image = FrameSet.image
+    monkeypatch.setattr(FrameSet, "image", lambda self, frame_id: decoded.append(frame_id) or image(self, frame_id))
+    rc, out, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "color", "--matcher", "sift",
+                        "--out", tmp_path / "both", "--workers", "1", "--quiet")
+    assert rc == 0, err
+    lines = out.strip().splitlines()
+    assert [line.split("@")[0] for line in lines] == ["color", "sift"]
+    assert sorted(decoded) == sorted(set(decoded)) and len(decoded) == len(tiny_frameset.frames)  # each frame once
+    for line, name in zip(lines, ("color", "sift")):
+        alone = _run(capsys, "score", tiny_frameset.root, "--matcher", name, "--out", tmp_path / name, "--workers",
+                     "1", "--quiet")[1]
+        pd.testing.assert_frame_equal(pd.read_parquet(line.split(" -> ")[-1]),
+                                      pd.read_parquet(alone.strip().split(" -> ")[-1]))
+    rc, _, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "color", "--matcher", "color")
+    assert rc == 2 and "a matcher is named twice" in err
+    rc, _, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "color", "--matcher", "sift", "--cfg", "k=1")
+    assert rc == 2 and "--cfg/--weights with 2 matchers" in err

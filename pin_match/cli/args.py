@@ -16,6 +16,7 @@ from typing import Any
 
 from pin_match.contract.matcher import ConfigError
 from pin_match.contract.registry import parse_overrides, with_weights
+from pin_match.errors import PinMatchError
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 
 
@@ -127,3 +128,7 @@ def policy_of(a: argparse.Namespace):
     from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy
 
     return FIRST_MATCH if a.policy is None else StopPolicy.parse(a.policy)
+
+
+class UsageError(PinMatchError, ValueError):
+    """Arguments that argparse cannot check alone."""

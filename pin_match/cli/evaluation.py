@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 
 from pin_match import outputs
 from pin_match.cli.args import (
+    UsageError,
     add_bench_config,
     add_matcher_config,
     add_run_options,
@@ -25,7 +26,6 @@ from pin_match.cli.args import (
     policy_of,
 )
 from pin_match.data.frameset import FrameSet
-from pin_match.errors import PinMatchError
 from pin_match.scoring.cache import cache_dir
 from pin_match.scoring.table import ScoreTable
 
@@ -36,10 +36,6 @@ if TYPE_CHECKING:
 
 WORKERS_HELP = ("worker processes/threads (default: up to 2 for scoring, all cores for rendering); with "
                 "--scheduler local, the Dask worker processes that score")
-
-
-class UsageError(PinMatchError, ValueError):
-    """Arguments that argparse cannot check alone."""
 
 
 def _table(a: argparse.Namespace, fs: FrameSet) -> ScoreTable:

@@ -15,6 +15,7 @@ from pathlib import Path
 from pin_match import outputs
 from pin_match.cli import catalog, data, evaluation, fitting, pages, policies, training
 from pin_match.cli.args import (
+    UsageError,
     add_matcher_config,
     add_run_options,
     add_scheduler,
@@ -63,14 +64,23 @@ def _cmd_import(a: argparse.Namespace) -> None:
 def _cmd_score(a: argparse.Namespace) -> None:
     import pandas as pd
 
-    from pin_match.scoring import read_meta, score_to_file
+    from pin_match.contract.registry import create_matcher
+    from pin_match.scoring import Job, read_meta, run_jobs
 
+    names = list(dict.fromkeys(a.matcher))
+    if len(names) < len(a.matcher):
+        raise UsageError(f"--matcher {' '.join(a.matcher)}: a matcher is named twice")
+    overrides = matcher_overrides(a)
+    if overrides and len(names) > 1:
+        raise UsageError(f"--cfg/--weights with {len(names)} matchers: they configure one matcher; score the "
+                         "configured one alone, or use `pin-match bench` (--cfg MATCHER:KEY=VALUE)")
+    jobs = [Job(create_matcher(name, **overrides)) for name in names]  # every name checked before anything runs
     with engine_run(a) as run:
-        path = score_to_file(a.frameset, a.matcher, overrides=matcher_overrides(a), split=a.split, out=a.out,
-                             shard=a.shard, run=run)
-    s = pd.read_parquet(path, columns=["score"]).score
-    summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
-    print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
+        paths = run_jobs(a.frameset, jobs, split=a.split, out=a.out, shard=a.shard, run=run)
+    for path in paths:  # one pass over the frames for every matcher: each frame decoded once, shared parts once
+        s = pd.read_parquet(path, columns=["score"]).score
+        summary = f"score min {s.min():.4g} / mean {s.mean():.4g} / max {s.max():.4g}" if len(s) else "no frames"
+        print(f"{read_meta(path)['matcher_id']}: {len(s)} frames, {summary} -> {path}")
 
 
 def _cmd_merge(a: argparse.Namespace) -> None:
@@ -116,9 +126,11 @@ def _add_import(sub: argparse._SubParsersAction) -> None:
 
 
 def _add_score_and_merge(sub: argparse._SubParsersAction) -> None:
-    s = sub.add_parser("score", help="score a frame-set with a matcher (cached, resumable)")
+    s = sub.add_parser("score", help="score a frame-set with one matcher or several in one pass (cached, resumable)")
     s.add_argument("frameset", type=Path, help="frame-set folder (from `pin-match synth` or `pin-match import`)")
-    s.add_argument("--matcher", required=True, help="registered matcher name (`pin-match list`)")
+    s.add_argument("--matcher", required=True, action="append",
+                   help="registered matcher name (`pin-match list`); repeat it to score several in one pass over the "
+                        "frames (each frame decoded once, a part they share computed once), one table each")
     add_matcher_config(s)
     s.add_argument("--split", help="score only this split (default: every frame)")
     s.add_argument("--out", type=Path, default=outputs.SCORES,
