@@ -21,4 +21,52 @@ def test_the_shipped_sigmas_were_tuned_on_this_set_for_these_matchers(demo_set, 
     redo = REDO.format(folder=f"{demo_set.folder}/" if demo_set.folder else "", file=demo_set.sigmas)
     assert demo_set.shipped.is_file(), redo
     fs = demo_set.build(tmp_path / "frameset", 0, RunOptions(workers=2, progress=False))
-    assert shipped_sigmas(demo_set, fs) == demo_set.shipped, redo
+    assert shipped_sigmas(demo_set, fs)[0] == demo_set.shipped, redo
+
+
+def _built(root, provenance: dict, shade: int):
+    """A two-episode set of one definition (``provenance``) whose frames' bytes depend on ``shade``, as a renderer or
+    a JPEG writer on another machine would make them."""
+    import numpy as np
+
+    from conftest import make_view
+    from pin_match.data.writer import Frame, FrameSetWriter
+
+    w = FrameSetWriter(root, "demo-like", provenance=provenance)
+    for oid, split in (("mug_a", "train"), ("mug_b", "val")):
+        w.add_object(oid, "mug", split, [make_view((200, 30, 30))] * 3, [f"{oid} {k}" for k in range(3)])
+        w.add_episode(f"ep_{split}", split, "house", oid, [])
+        roles = w.roles(f"ep_{split}")
+        for step in range(2):
+            mask = np.zeros((64, 48), np.uint16)
+            mask[10:20, 10:20] = 1
+            w.write_frame(f"ep_{split}", step, Frame(np.full((64, 48, 3), shade + step, np.uint8), mask,
+                                                     {1: (oid, roles[oid])}))
+    return w.close()
+
+
+def test_shipped_sigmas_follow_the_set_s_definition_not_its_bytes(tmp_path):
+    """Issue 60.1: the same definition with other frame bytes gets the shipped sigmas; another seed, another
+    generator version or another matcher id does not, and the line says why."""
+    from dataclasses import replace
+
+    from pin_match import atomic
+    from pin_match.contract.registry import create_matcher
+    from pin_match.evaluation.flows.demo import SCANNED, set_definition
+
+    provenance = dict(generator="pin_match.data.synth", version=5, seed=0, episodes=2)
+    here = _built(tmp_path / "here", provenance, 90)
+    there = _built(tmp_path / "there", provenance, 91)  # another machine's bytes
+    assert here.fingerprint != there.fingerprint
+    shipped = tmp_path / "shipped.json"
+    atomic.write_json(shipped, dict(definition=set_definition(here), frameset_fingerprint=here.fingerprint,
+                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
+    demo_set = replace(SCANNED, matchers=("color",), sigmas=str(shipped))  # an absolute path replaces the folder
+    assert shipped_sigmas(demo_set, there) == (shipped, "shipped (shipped.json: tuned on the train split of a set "
+                                                        "of this definition)")
+    for change, word in ((dict(seed=1), "seed"), (dict(version=6), "version")):
+        other = _built(tmp_path / word, provenance | change, 90)
+        path, why = shipped_sigmas(demo_set, other)
+        assert path is None and f"another definition of the set ({word})" in why and "--tune" in why
+    path, why = shipped_sigmas(replace(demo_set, matchers=("color", "sift")), there)
+    assert path is None and f"not for {create_matcher('sift').id}" in why

@@ -197,3 +197,18 @@ def test_tune_policy_chooses_sigma_for_the_window(walk_set):  # noqa: F811
     assert tune_policy(table, walk_set, FIRST_MATCH, objective="sr", split="val")["sigma"] == 0.95
     looked = tune_policy(table, walk_set, LookFurther(window=4), objective="sr", split="val")
     assert looked["policy"] == "look:4" and looked["objective_value"] == pytest.approx(100, abs=0.01)
+
+
+def test_the_trade_reads_each_window_at_its_own_sigma(walk_set, tmp_path):  # noqa: F811
+    from pin_match.evaluation.flows.trade import trade, write_trade
+
+    table = table_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.95, 0.0])
+    policies = [LookFurther(window=0), LookFurther(window=4), LookFurther(window=None)]
+    rows = trade(EvalContext(walk_set), {"hand": table}, policies, tune_split="val", read_split="val")
+    assert rows.policy.tolist() == ["look:0", "look:4", "look:rest"] and rows.upper_bound.tolist() == [0, 0, 1]
+    assert rows.window.iloc[:2].tolist() == [0, 4] and math.isnan(rows.window.iloc[2])
+    assert rows.sigma.tolist() == [0.95] * 3  # ties go to the highest sigma: only 0.95 passes the look-alike by
+    # first match stops at step 4 (4 walked, 3 m ahead: 12 forward, stop); a window commits at step 5 (2 m left)
+    assert rows.steps.tolist() == [4 + 12 + 1, 5 + 8 + 1, 5 + 8 + 1] and rows.sr.tolist() == [100.0] * 3
+    csv, png = write_trade(rows, tmp_path)
+    assert pd.read_csv(csv).shape == rows.shape and png.stat().st_size > 0

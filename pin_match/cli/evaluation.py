@@ -132,7 +132,8 @@ def _cmd_demo(a: argparse.Namespace) -> None:
     with engine_run(a) as run:
         results = demo(a.out, sets, seed=a.seed, run=run, watch=watch, tune=a.tune)
     for r in results:
-        print(f"\nPIN metrics on {r.caption}; {r.bench.caption}\n")
+        print(f"\n{r.sigma_note}")
+        print(f"PIN metrics on {r.caption}; {r.bench.caption}\n")
         print(markdown_table(r.bench.joint))
     print(f"\nreports, plots, thresholds and score tables: {a.out}")
     print(f"\nwhere the time went (wall seconds; scoring reuses cached tables):\n{watch.breakdown()}")

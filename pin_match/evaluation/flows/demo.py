@@ -6,9 +6,11 @@ treatment: sigma chosen without its val split, each matcher compared with the se
 (paired intervals, McNemar), and ``index.html`` tells the story (``index_page``), the real
 photos first. Sigma is the one tuned on the set's own train split (first-match objective) when
 pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
-fingerprint and each matcher's id), so a newcomer's run scores the val split only; a set or a
-matcher that no longer matches what was shipped, another seed, or ``tune=True`` tunes on the
-train split again (and writes the table to ship into the set's folder). The scanned set's
+definition, its builder's provenance and frames per split, and each matcher's id), so a newcomer's
+run scores the val split only. The definition decides, not the frames' bytes: a renderer or JPEG
+writer on another machine gives other bytes for the same set. A set or a matcher that no longer
+matches what was shipped, another seed, or ``tune=True`` tunes on the train split again (and
+writes the table to ship into the set's folder), and says why in one line. The scanned set's
 folder is the demo folder itself (the notebooks read it), the real photos' is nested in it; a
 set found there built with another seed is built again. A ``Stopwatch`` collects where the
 time went, with the number of frames each matcher scored, so a slow step can be found without
@@ -103,28 +105,44 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
         here = layout.nested(s.folder) if s.folder else layout
         timer = watch.within(s.name)
         fs = _load_or_make(here.frameset, seed, timer, lambda path, s=s: s.build(path, seed, run))
-        shipped = None if tune else shipped_sigmas(s, fs)
+        shipped, why = (None, "tuned on its train split as asked (--tune)") if tune else shipped_sigmas(s, fs)
         done = bench(EvalContext(fs), s.matchers, here, sigma=SigmaRule(shipped or "train"), run=run,
                      watch=timer)
         if shipped is None:
             write_sigmas_to_ship(done, fs, here.root / SIGMAS_TO_SHIP)
         with timer.step("compare"):
             comparisons = compare_bench(done.run)
-        results.append(SetResults(s.name, s.caption, done, comparisons))
+        results.append(SetResults(s.name, s.caption, done, comparisons, f"sigmas of {s.name}: {why}"))
     with watch.step("index page"):
         write_index(layout, results)
     return results
 
 
-def shipped_sigmas(s: DemoSet, fs: FrameSet) -> Path | None:
-    """The set's shipped sigmas when they were tuned on this very frame-set for these very matchers, else None."""
+def set_definition(fs: FrameSet) -> dict:
+    """What defines a built set, whatever bytes a machine's renderer, camera model or JPEG writer gave it: its
+    builder's provenance (generator and version, seed, sizes, source) and its frames per split."""
+    return dict(provenance=fs.manifest.get("provenance", {}),
+                frames={str(k): int(v) for k, v in fs.frames.split.value_counts().sort_index().items()})
+
+
+def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
+    """The set's shipped sigmas when they were tuned on a set of this definition (``set_definition``) for these
+    very matchers, else None; and one line saying which, and why not and how to re-tune."""
     if not s.shipped.exists():
-        return None
+        return None, f"none shipped ({s.shipped} missing): tuned on its train split"
     shipped = atomic.read_json(s.shipped, DemoError, "shipped demo sigmas")
     ids = {create_matcher(name).id for name in s.matchers}
-    if shipped.get("frameset_fingerprint") != fs.fingerprint or not ids <= set(shipped.get("thresholds", {})):
-        return None
-    return s.shipped
+    redo = "tuned on its train split instead (`pin-match demo --tune` writes the table to ship)"
+    definition, theirs = set_definition(fs), shipped.get("definition", {})
+    if definition != theirs:
+        differs = sorted(k for part in ("provenance", "frames") for k in
+                         set(definition.get(part, {})) | set(theirs.get(part, {}))
+                         if definition.get(part, {}).get(k) != theirs.get(part, {}).get(k))
+        return None, f"the shipped ones were tuned on another definition of the set ({', '.join(differs)}): {redo}"
+    missing = sorted(ids - set(shipped.get("thresholds", {})))
+    if missing:
+        return None, f"the shipped ones were tuned for other matcher versions (not for {', '.join(missing)}): {redo}"
+    return s.shipped, f"shipped ({s.shipped.name}: tuned on the train split of a set of this definition)"
 
 
 def write_sigmas_to_ship(done: Bench, fs: FrameSet, path: Path) -> None:
@@ -134,7 +152,7 @@ def write_sigmas_to_ship(done: Bench, fs: FrameSet, path: Path) -> None:
         label="tuned: first-match on train (shipped)",
         source=f"tuned with the first-match objective on the train split of the demo set {fs.manifest.get('name')!r}"
                " (seed 0) by `pin-match demo --tune`, shipped with pin_match",
-        frameset_fingerprint=fs.fingerprint,
+        definition=set_definition(fs), frameset_fingerprint=fs.fingerprint,
         thresholds={r["matcher_id"]: {"sigma": r["sigma"], "train_metrics": r["metrics_at_sigma"]}
                     for r in done.run.tuned.values()}))
 

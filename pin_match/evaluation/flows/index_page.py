@@ -38,6 +38,7 @@ class SetResults:
     caption: str
     bench: Bench
     comparisons: Sequence[Comparison] = ()
+    sigma_note: str = ""  # where the demo's sigmas came from, and why where the shipped ones did not apply
 
 
 def first_match_line(result: dict) -> str:

@@ -141,12 +141,14 @@ def plot_per_category(categories: pd.DataFrame, path: str | Path, title: str = "
 def plot_trade(rows: pd.DataFrame, path: str | Path, title: str = "") -> None:
     """``flows.trade``'s rows: per matcher, SR, CE, SPL and Steps against the look-further window (where the frame-set
     has geometry; else the shares committed to the target and to a look-alike and the frames looked at), the rest of
-    the walk drawn apart at the right as the upper bound it is."""
+    the walk drawn apart at the right as the upper bound it is. Only plain windows (``look:W``) are drawn; the other
+    policies' rows stay in trade.csv."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    rows = rows[rows["policy"].str.fullmatch(r"look:(\d+|rest)")]
     walks = "sr" in rows and rows["sr"].notna().any()
     panels = (("sr", "SR %"), ("ce", "CE %"), ("spl", "SPL %"), ("steps", "Steps")) if walks else \
         (("commit_target_pct", "committed to the target %"), ("commit_lookalike_pct", "committed to a look-alike %"),
