@@ -110,4 +110,10 @@ def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
     assert re.findall(r'<a href="([^"]+)"', text) == ["lookalikes/reports/color/report.html",
                                                        "reports/color/report.html", "reports/sift/report.html",
                                                        "compare/sift_vs_color/compare.html"]
+    # issue 60.7: each set's first matches are one table row per val episode, one cell per matcher (no staggering)
+    tables = re.findall(r'<table class="figures">.*?</table>', text, flags=re.S)
+    assert [re.findall(r"<th>(.*?)</th>", t) for t in tables] == [["target", "color"], ["target", "color", "sift"]]
+    for t, n_cells in zip(tables, (2, 3)):
+        rows = re.findall(r"<tr>(.*?)</tr>", t.split("<tbody>")[1], flags=re.S)
+        assert len(rows) == 1 and all(row.count("<td>") == n_cells for row in rows)  # the tiny set: 1 val episode
     check_page(browser, index, "index.png")

@@ -107,15 +107,15 @@ def stops(run: BenchRun, matcher: str) -> dict[str, object]:
 
 
 def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
-    """Per val episode: the target's references, then each matcher's first frame above its sigma, and where the
-    agent would stop (where the frame-set has geometry)."""
+    """One row per val episode, one column per matcher: the target's references, then each matcher's first frame
+    above its sigma, and where the agent would stop (where the frame-set has geometry)."""
     run = s.bench.run
     firsts, walks = {}, {m: stops(run, m) for m in run.matchers}
     for m in run.matchers:
         first = first_matches(run.scored(m, "val"), run.sigmas[m])
         firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
     val = run.frameset.episodes[run.frameset.episodes.split == "val"].sort_values("episode_id").head(episodes)
-    parts = []
+    rows = []
     for _, ep in val.iterrows():
         target = run.frameset.target(ep.target_object_id)
         figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
@@ -131,8 +131,8 @@ def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODE
             figures.append(html.figure([image], [f"{m}: first match at step {f.step}", f"shows: {f.role}",
                                                  f"score {f.score:.3g} (sigma {run.sigmas[m]:g})", *stop],
                                        "hit" if f.role == "target" else "miss"))
-        parts.append(html.gallery(figures))
-    return parts
+        rows.append(figures)
+    return [html.figure_table(["target", *run.matchers], rows)]
 
 
 def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:

@@ -37,6 +37,7 @@ figure { margin: 0; border: 1px solid #ccc; padding: 0.4em; background: #f7f7f7;
 figure.hit { border-color: #0a0; } figure.miss { border-color: #c00; }
 figcaption { font-size: 0.8em; max-width: 330px; overflow-wrap: anywhere; }
 .refs img { margin-right: 2px; }
+table.figures td, table.figures th { vertical-align: top; text-align: left; border: none; padding: 0.3em; }
 .note { color: #444; font-size: 0.9em; }
 .swatch { display: inline-block; width: 0.9em; height: 0.9em; vertical-align: middle; border: 1px solid #333; }
 """
@@ -115,6 +116,17 @@ def figure(images: Sequence[Markup], caption_lines: Sequence[str], cls: str | No
     attr = Markup(' class="{}"').format(cls) if cls else ""
     caption = Markup("<br>").join(escape(line) for line in caption_lines)
     return Markup("<figure{}>{}<figcaption>{}</figcaption></figure>").format(attr, join(images), caption)
+
+
+def figure_table(header: Sequence[str], rows: Sequence[Sequence[Markup]]) -> Markup:
+    """Figures in a table, one row per item and one column per header, so the rows line up whatever each figure's
+    height (a gallery wraps and staggers them)."""
+    if not rows:
+        return paragraph("(none)", "note")
+    head = Markup("").join(Markup("<th>{}</th>").format(h) for h in header)
+    body = Markup("").join(Markup("<tr>{}</tr>").format(Markup("").join(Markup("<td>{}</td>").format(c) for c in row))
+                           for row in rows)
+    return Markup('<table class="figures"><thead><tr>{}</tr></thead><tbody>{}</tbody></table>').format(head, body)
 
 
 def gallery(figures: Sequence[Markup]) -> Markup:
