@@ -19,6 +19,7 @@ from markupsafe import Markup
 from pin_match.evaluation.core.analysis import BenchRun
 from pin_match.evaluation.core.layout import BenchLayout
 from pin_match.evaluation.core.navigation import episodes_at
+from pin_match.evaluation.core.stop import StopPolicy
 from pin_match.evaluation.flows.bench import Bench
 from pin_match.evaluation.flows.compare import Comparison
 from pin_match.evaluation.pages import html
@@ -99,10 +100,12 @@ def stop_line(walk) -> str:
 
 
 def stops(run: BenchRun, matcher: str) -> dict[str, object]:
-    """Each val episode's stop (``navigation.episodes_at``) by episode id; none without the frame-set's geometry."""
+    """Each val episode's stop (``navigation.episodes_at``, under the stop policy the matcher was reported with) by
+    episode id; none without the frame-set's geometry."""
     if run.frameset.navigation_missing is not None:
         return {}
-    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher])
+    policy = StopPolicy.parse(run.reports[matcher].get("policy", "1-of-1"))
+    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher], policy)
     return {w.episode_id: w for w in walks.itertuples()}
 
 
