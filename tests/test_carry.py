@@ -191,3 +191,18 @@ def test_carry_command_compares_stop_policies(tiny_frameset, tmp_path, capsys):
     assert "named twice" in capsys.readouterr().err
     assert main([*args, "--policy", "house:best"]) == 2
     assert "house:topT+MARGIN" in capsys.readouterr().err
+
+
+def test_a_carried_row_says_what_a_look_further_policy_commits_to(tiny_frameset):
+    """Per episode of the tiny set: the target at step 0, a look-alike at step 1. Where the look-alike outscores the
+    target, PIN's rule still commits to the target (it fires first) and a window of one more frame commits to the
+    look-alike: the commit columns follow the decisions, as shares of every episode."""
+    from pin_match.evaluation.core.stop import LookFurther
+
+    frames = scored_set(tiny_frameset, (0.7, 0.9, 0.2, 0.1))
+    pin = carried(frames.reading, 0.6, frames.clusters, BOOT)
+    assert (pin["commit_target"], pin["commit_lookalike"], pin["looked"]) == (100.0, 0.0, 1.0)
+    look = carried(frames.reading, 0.6, frames.clusters, BOOT, LookFurther(window=1))
+    assert (look["commit_target"], look["commit_lookalike"], look["looked"]) == (0.0, 100.0, 2.0)
+    assert look["own_commit_target"] == 0.0 and look["commit_gap"] == 0.0  # no sigma saves it from the look-alike
+    assert look["first_success"] == 0.0 and look["cm"] == 100.0  # the found frame is the one it commits to
