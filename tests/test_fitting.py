@@ -14,7 +14,7 @@ from pin_match.contract.registry import create_matcher
 from pin_match.fitting.fusion import fit_fusion
 from pin_match.fitting.logistic import logistic_fit
 from pin_match.fitting.verifier import CandidateSignals, candidate_table, fit_verifier
-from pin_match.matchers.verify import SIGNALS
+from pin_match.matchers.common.verifier_file import SIGNALS
 from pin_match.scoring import RunOptions
 from pin_match.scoring.cache import cache_dir, read_meta
 from pin_match.scoring.schema import encode_meta

@@ -3,6 +3,9 @@
 from __future__ import annotations
 
 import json
+import re
+import warnings
+from pathlib import Path
 
 import cv2
 import numpy as np
@@ -134,3 +137,35 @@ def test_a_distractor_needs_descriptions_too(recording, tmp_path):
     path.write_text(json.dumps(data))
     with pytest.raises(FrameSetError, match="object 'obj_o': no entry in .*every goal and distractor needs 3"):
         import_recording(rec, objects, tmp_path / "fs")
+
+
+def with_poses(rec: Path, camera: dict) -> Path:
+    """The recording's episode with PIN's geometry fields and a poses.json (every step at the start, level) holding
+    ``camera``'s fields; the file's path."""
+    episodes = json.loads((rec / "episodes.json").read_text())["episodes"]
+    episodes[0].update(start_position=[0.0, 0.0, 0.0], start_rotation=[0.0, 0.0, 0.0, 1.0],
+                       info=dict(geodesic_distance=2.0))
+    episodes[0]["goals"][0]["position"] = [0.0, 0.5, -2.0]
+    (rec / "episodes.json").write_text(json.dumps({"episodes": episodes}))
+    path = rec / "7" / "poses.json"
+    path.write_text(json.dumps({**camera, "gps_compass_pitch": [[0.0, 0.0, 0.0, 0.0]] * 3}))
+    return path
+
+
+def test_poses_without_the_camera_take_pins_with_a_warning_naming_the_file(recording, tmp_path):
+    rec, objects, _ = recording
+    path = with_poses(rec, {"hfov_deg": 60.0})
+    with pytest.warns(UserWarning, match=rf"^{re.escape(str(path))} records no camera_height: PIN's camera assumed "
+                                         r"\(42 degrees wide, 1\.31 m high\)"):
+        fs = import_recording(rec, objects, tmp_path / "fs")
+    assert fs.geometry.camera.hfov_deg == 60.0 and fs.geometry.pose("7_0000").z == pytest.approx(1.31)
+
+
+def test_poses_with_the_camera_import_without_a_warning(recording, tmp_path):
+    rec, objects, _ = recording
+    with_poses(rec, {"hfov_deg": 60.0, "camera_height": 1.0})
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        fs = import_recording(rec, objects, tmp_path / "fs")
+    assert not [w for w in caught if "camera assumed" in str(w.message)]
+    assert fs.geometry.camera.hfov_deg == 60.0 and fs.geometry.pose("7_0000").z == pytest.approx(1.0)

@@ -11,8 +11,9 @@ import torch
 
 from pin_match.contract import ConfigError, MatchResult, WeightsError, check_matcher, create_matcher
 from pin_match.matchers.cascade import cascade_result, keypoint_bonus
-from pin_match.matchers.fusion import fused_score, read_fusion
-from pin_match.matchers.parts import part_matches, reference_cells
+from pin_match.matchers.common.cell_parts import part_matches, reference_cells
+from pin_match.matchers.common.fusion_file import read_fusion
+from pin_match.matchers.fusion import fused_score
 
 
 def unit(*rows):

@@ -311,13 +311,13 @@ def test_a_recording_with_poses_in_some_episodes_only_is_refused(walk_set, tmp_p
         with recorder.episode(record):
             sensors = dict(gps=[0.0, 0.0], compass=[0.0]) if with_pose else {}
             recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32),
-                                 **sensors))
+                                 **sensors), camera_pitch=0.0)
     with pytest.raises(GeometryError, match="episode 'e0' recorded the agent's poses .* episode 'e1' did not"):
         import_recording(tmp_path / "rec", walk_set.root, tmp_path / "out")
     recorder = FrameRecorder(tmp_path / "rec2")
     with recorder.episode(dict(pin_episode(walk_set, walk_set.episode_records[0]), episode_id="x")):
         recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32),
-                             gps=[0.0, 0.0], compass=[0.0]))
+                             gps=[0.0, 0.0], compass=[0.0]), camera_pitch=0.0)
         with pytest.raises(RecordingError, match="no gps or compass, which earlier steps had"):
             recorder.record(dict(rgb=np.zeros((SIZE, SIZE, 3), np.uint8), semantic=np.zeros((SIZE, SIZE), np.int32)))
 

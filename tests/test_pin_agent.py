@@ -384,6 +384,17 @@ def test_a_semantic_frame_of_the_wrong_size_is_refused(open_recorder):
         recorder.record(dict(rgb=obs["rgb"]))
 
 
+def test_a_pose_without_the_camera_pitch_is_refused_and_a_level_one_is_recorded(open_recorder):
+    """No sensor holds the tilt, so a recorder never assumes one: 0 (level) is the caller's to say."""
+    recorder, obs = open_recorder
+    pose = dict(obs, gps=[1.0, -0.5], compass=[0.25])
+    with pytest.raises(RecordingError, match=r"step 0: gps and compass recorded without camera_pitch"):
+        recorder.record(pose)
+    recorder.record(pose, camera_pitch=0.0)
+    folder = recorder.finish_episode()
+    assert json.loads((folder / "poses.json").read_text())["gps_compass_pitch"] == [[1.0, -0.5, 0.25, 0.0]]
+
+
 def test_unknown_ids_are_refused(open_recorder):
     recorder, obs = open_recorder
     semantic = obs["semantic"].copy()

@@ -35,16 +35,15 @@ from pin_match.matchers.common.candidates import (
     shaped_box,
     square_around,
 )
-from pin_match.matchers.verify import (
-    DEFAULT_COLOR_GATE,
+from pin_match.matchers.common.verifier_file import (
     DEFAULT_SIGNALS,
     SIGNALS,
-    VerifyMatcher,
     check_verifier,
     color_shortfall,
     read_verifier,
     verdict,
 )
+from pin_match.matchers.verify import DEFAULT_COLOR_GATE, VerifyMatcher
 from pin_match.scoring import RunOptions
 
 FAST = dict(signals=("proto", "margin", "desc", "color"), candidates=2)  # no keypoints: quick

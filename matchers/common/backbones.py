@@ -238,7 +238,8 @@ class FeatureMapBackbone:
                  img_size: int, layer: str, device: str = "cpu") -> None:
         keep_large_blocks_on_the_heap()
         self.trunk = trunk.eval()
-        fold_batch_norms(self.trunk, torch.zeros(1, 3, 64, 64))
+        # a random input: the fold checks the network's output on it, which zeros would mostly map to constants
+        fold_batch_norms(self.trunk, torch.randn(1, 3, 64, 64, generator=torch.Generator().manual_seed(0)))
         with torch.inference_mode():  # the layer's stride, measured: the libraries list only some reductions
             stride = 64 // self.trunk(torch.zeros(1, 3, 64, 64)).shape[-1]
         if img_size % stride:

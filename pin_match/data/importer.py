@@ -21,6 +21,7 @@ re-compressed); ``image_format="png"`` or ``"jpeg"`` re-encode.
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -221,7 +222,11 @@ def _load_array(path: Path) -> np.ndarray:
 
 # ------------------------------------------------------------------ geometry: Habitat's frames into the house frame
 def _recorded_poses(recording: Path, episodes: list[dict]) -> dict[str, dict] | None:
-    """Each episode's ``poses.json`` when every episode has one, None when none has; a mix is refused."""
+    """Each episode's ``poses.json`` when every episode has one, None when none has; a mix is refused.
+
+    A file without the camera's ``hfov_deg`` or ``camera_height`` (one not written by a
+    ``FrameRecorder``) gets PIN's, with a warning naming it: the geometry is only as right as the
+    camera, so the guess is said out loud, once here, and read as recorded everywhere after."""
     found = {str(ep["episode_id"]): recording / str(ep["episode_id"]) / POSES for ep in episodes}
     have = [e for e, p in found.items() if p.is_file()]
     if not have:
@@ -230,19 +235,25 @@ def _recorded_poses(recording: Path, episodes: list[dict]) -> dict[str, dict] | 
     if lacking:
         raise GeometryError(f"{recording}: episode {have[0]!r} recorded the agent's poses ({POSES}) but episode "
                             f"{lacking[0]!r} did not: record gps and compass in every episode or in none")
-    out = {}
+    pin, out, without_camera = {"hfov_deg": PIN_HFOV_DEG, "camera_height": PIN_CAMERA_HEIGHT}, {}, []
     for episode_id, path in found.items():
         data = atomic.read_json(path, GeometryError, "recorded poses")
         steps = data.get("gps_compass_pitch") if isinstance(data, dict) else None
         if not isinstance(steps, list) or not all(isinstance(s, list) and len(s) == 4 for s in steps):
             raise GeometryError(f"{path}: expected {{'gps_compass_pitch': [[forward, right, compass, pitch], ...]}}")
-        out[episode_id] = data
+        if set(pin) - set(data):
+            without_camera.append((path, sorted(set(pin) - set(data))))
+        out[episode_id] = {**pin, **data}
+    if without_camera:
+        (first, missing), more = without_camera[0], len(without_camera) - 1
+        warnings.warn(f"{first}{f' (and {more} more {POSES})' if more else ''} records no {' or '.join(missing)}: "
+                      f"PIN's camera assumed ({PIN_HFOV_DEG:g} degrees wide, {PIN_CAMERA_HEIGHT:g} m high); a "
+                      f"FrameRecorder writes both", stacklevel=3)
     return out
 
 
 def _same_camera(poses: dict[str, dict], recording: Path) -> dict:
-    cameras = {(float(p.get("hfov_deg", PIN_HFOV_DEG)), float(p.get("camera_height", PIN_CAMERA_HEIGHT)))
-               for p in poses.values()}
+    cameras = {(float(p["hfov_deg"]), float(p["camera_height"])) for p in poses.values()}
     if len(cameras) > 1:
         raise GeometryError(f"{recording}: episodes recorded with different cameras {sorted(cameras)}: one "
                             "frame-set has one camera")
@@ -257,7 +268,7 @@ def _camera_pose(poses: dict, step: int, path: Path) -> Pose:
     if step >= len(steps):
         raise GeometryError(f"{path}: no pose for step {step} (it holds {len(steps)})")
     forward, right, compass, pitch = (float(v) for v in steps[step])
-    return Pose(forward, -right, float(poses.get("camera_height", PIN_CAMERA_HEIGHT)), compass, pitch)
+    return Pose(forward, -right, float(poses["camera_height"]), compass, pitch)
 
 
 def episode_in_start_frame(ep: dict, recording: Path) -> EpisodeGeometry:

@@ -24,7 +24,7 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.labels import TM, class_weights, frame_classes, scored_frames
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
-from pin_match.matchers.fusion import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
+from pin_match.matchers.common.fusion_file import FUSION_FORMAT, FUSION_VERSION, TRANSFORMS, read_fusion
 from pin_match.scoring import DEFAULT_RUN, RunOptions, score_many
 
 Component = tuple[str, dict[str, Any], str]  # matcher name, config overrides, transform

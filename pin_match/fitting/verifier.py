@@ -28,18 +28,18 @@ import pyarrow as pa
 import pin_match
 from pin_match import atomic, outputs
 from pin_match.contract.frames import Frames
+from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.labels import TM, UNUSED, class_weights, frame_classes
 from pin_match.evaluation.flows.carry import pooled
 from pin_match.fitting.logistic import FitError, logistic_fit, require_classes
-from pin_match.matchers.verify import (
+from pin_match.matchers.common.verifier_file import (
     DEFAULT_SIGNALS,
     SIGNALS,
     VERIFIER_FORMAT,
     VERIFIER_VERSION,
-    VerifyMatcher,
     color_shortfall,
     read_verifier,
     verdict,
@@ -78,17 +78,18 @@ class CandidateSignals(Product):
     One row per candidate: its frame, box, whether it is on the target (and ``cover``, the share
     of the target's pixels inside the box) and one column per signal of ``signals``. Its cache
     folder hashes the matcher's ``signals_id`` with the signals computed, so an ablation's fits
-    (subsets of them) and every evaluation read one table.
+    (subsets of them) and every evaluation read one table. The matcher is a ``verify``, built by
+    name (``create_matcher("verify", ...)``), as everywhere in fitting: the plug-in is never imported.
     """
 
     signals: tuple[str, ...] = DEFAULT_SIGNALS
     prefix: ClassVar[str] = "candidates"
 
-    def folder(self, matcher: VerifyMatcher) -> str:
+    def folder(self, matcher: Matcher) -> str:
         payload = json.dumps([matcher.signals_id, list(self.signals)])
         return f"verify-signals@{hashlib.sha256(payload.encode()).hexdigest()[:12]}"
 
-    def compute(self, matcher: VerifyMatcher, frames: Frames) -> list[Any]:
+    def compute(self, matcher: Matcher, frames: Frames) -> list[Any]:
         return matcher.candidate_signals(frames)
 
     def rows(self, fs: FrameSet, episode: Any, frame_ids: list[str], steps: np.ndarray,
@@ -109,14 +110,14 @@ class CandidateSignals(Product):
                          + [("on_target", pa.bool_()), ("cover", pa.float64())]
                          + [(s, pa.float64()) for s in self.signals])
 
-    def meta(self, matcher: VerifyMatcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
+    def meta(self, matcher: Matcher, fs: FrameSet, split: str | None, shard: Shard | None) -> dict:
         return as_stored(dict(kind="verify candidate signals", signals_id=matcher.signals_id,
                               signals=list(self.signals), frameset_fingerprint=fs.fingerprint,
                               frameset_name=fs.manifest.get("name", ""), split=split or "all",
                               shard=str(shard) if shard else None, pin_match_version=pin_match.__version__))
 
 
-def candidate_table(fs: FrameSet, matcher: VerifyMatcher, *, split: str | None = None,
+def candidate_table(fs: FrameSet, matcher: Matcher, *, split: str | None = None,
                     out: str | Path = outputs.FEATURES, run: RunOptions = DEFAULT_RUN) -> pd.DataFrame:
     """The candidates of every frame of ``split`` with the matcher's signals (``CandidateSignals``).
 
@@ -184,7 +185,7 @@ def fit_verifier(framesets: Sequence[FrameSet | str | Path | EvalContext], path:
     return spec
 
 
-def fit_spec(matcher: VerifyMatcher, sets: Sequence[tuple[FrameSet, pd.DataFrame, pd.DataFrame]], split: str,
+def fit_spec(matcher: Matcher, sets: Sequence[tuple[FrameSet, pd.DataFrame, pd.DataFrame]], split: str,
              l2: float) -> dict[str, Any]:
     """The verifier file of ``matcher``'s signals and colour gate, fitted on ``split`` of each (frame-set, its
     labels, a candidate table holding those signals); a FitError when there is nothing to fit on."""

@@ -21,6 +21,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match import atomic, outputs
+from pin_match.contract.matcher import Matcher
 from pin_match.contract.registry import create_matcher
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.evaluator import EvalContext
@@ -32,7 +33,7 @@ from pin_match.evaluation.core.tuning import sigma_for
 from pin_match.evaluation.flows.carry import carried, pooled
 from pin_match.fitting.logistic import FitError
 from pin_match.fitting.verifier import candidate_table, fit_spec, frame_scores
-from pin_match.matchers.verify import DEFAULT_SIGNALS, SIGNALS, VerifyMatcher, verdict
+from pin_match.matchers.common.verifier_file import DEFAULT_SIGNALS, SIGNALS, verdict
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable
 
@@ -81,7 +82,7 @@ class Sets:
     evals: dict[str, tuple[FrameSet, pd.DataFrame, pd.DataFrame]]
 
     @classmethod
-    def load(cls, train: Sequence[str], evals: Sequence[str], base: VerifyMatcher, features: str | Path,
+    def load(cls, train: Sequence[str], evals: Sequence[str], base: Matcher, features: str | Path,
              run: RunOptions) -> Sets:
         contexts: dict[str, EvalContext] = {}
 

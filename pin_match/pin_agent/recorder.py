@@ -101,11 +101,12 @@ class FrameRecorder:
                 raise atomic.OutputError(f"cannot write into {self.root}: {exc.strerror or exc}") from exc
         return done is None
 
-    def record(self, observations: Mapping[str, Any], *, camera_pitch: float = 0.0) -> None:
+    def record(self, observations: Mapping[str, Any], *, camera_pitch: float | None = None) -> None:
         """Store one step: ``rgb`` (H x W x 3 uint8), ``semantic`` (PIN labels), optional ``depth`` (metres), and
         where the agent stood: PIN's ``gps`` ([forward, right] metres from the start) and ``compass`` (radians, turned
         left positive), with ``camera_pitch`` (radians up, the agent's tilt, 0 = level); every step of an episode
-        or none."""
+        or none. The pitch is required with the pose: the observation does not hold it, PIN's look-up and
+        look-down actions change it, and a level camera assumed for a tilted one misplaces every pixel."""
         if self._record is None:
             raise RecordingError("record() before start_episode(): open the episode first")
         if self._staging is None:
@@ -200,7 +201,7 @@ class FrameRecorder:
             depth[np.isin(depth, DEPTH_REPLACEMENT_VALUES)] = 0.0
         return rgb, semantic.astype(np.int32), depth
 
-    def _check_pose(self, obs: Mapping[str, Any], pitch: float, where: str) -> None:
+    def _check_pose(self, obs: Mapping[str, Any], pitch: float | None, where: str) -> None:
         has = "gps" in obs and "compass" in obs
         if has != bool(self._poses) and self._steps:
             raise RecordingError(f"{where}: " + ("gps and compass appear after steps without them" if has else
@@ -208,6 +209,9 @@ class FrameRecorder:
                                  ": an episode's steps all carry the agent's pose or none does")
         if not has:
             return
+        if pitch is None:
+            raise RecordingError(f"{where}: gps and compass recorded without camera_pitch: pass record(..., "
+                                 "camera_pitch=RADIANS_UP) (0.0 for a level camera), the agent's tilt at this step")
         gps = np.asarray(obs["gps"], np.float64).reshape(-1)
         compass = np.asarray(obs["compass"], np.float64).reshape(-1)
         values = [*gps.tolist(), *compass.tolist(), float(pitch)]
