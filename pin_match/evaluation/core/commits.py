@@ -48,7 +48,8 @@ def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFr
                          committed_class=CLASSES[arr.cls[d.chosen]], committed_score=float(arr.score[d.chosen]),
                          fired_step=fired - start, commit_step=stop - start, looked_frames=stop - start + 1,
                          candidates=len(d.candidates)))
-    return pd.DataFrame(rows, columns=COMMIT_COLUMNS)
+    steps = ["committed_step", "fired_step", "commit_step", "looked_frames", "candidates"]
+    return pd.DataFrame(rows, columns=COMMIT_COLUMNS).astype({column: "Int64" for column in steps})
 
 
 def commit_shares(rows: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
