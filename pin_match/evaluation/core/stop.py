@@ -276,9 +276,9 @@ def describe(policy: StopPolicy) -> str:
         window = "to the walk's end (an upper bound)" if policy.upper_bound else f"{policy.window} more frames"
         clear = "" if policy.clear is None else f", committing at once to one that beats every earlier frame by " \
             f"{policy.clear:g}"
-        base = "first match" if (policy.k, policy.n) == (1, 1) else f"{policy.k} of {policy.n} frames"
-        return (f"{policy}: from the first {base} at sigma it looks {window}, then commits to the best candidate"
-                f"{clear}")
+        base = "PIN's first match" if (policy.k, policy.n) == (1, 1) else f"{policy.k} of {policy.n} frames"
+        return (f"{policy}: after its first firing at sigma ({base}) it looks {window}, then commits to the best "
+                f"candidate{clear}")
     if policy == FIRST_MATCH:
         return "first match at sigma (1-of-1)"
     return str(policy)
