@@ -62,9 +62,14 @@ def test_verify_and_effnet_together_run_effnet_once_per_batch_and_write_the_tabl
     assert create_matcher("verify").locator.id == create_matcher("effnet").id  # verify's locate map is effnet's
     assert tiny_frameset.episodes.target_object_id.nunique() == 2  # two targets in the one pass
     calls = _count(monkeypatch, EFFNET)
+    effnet_class = type(create_matcher("effnet"))
+    prepared, prepare = [], effnet_class._prepare
+    monkeypatch.setattr(effnet_class, "_prepare", lambda self, target: prepared.append(target.object_id)
+                        or prepare(self, target))
     tables = score_many(tiny_frameset, ["verify", "effnet"], out=tmp_path / "together", run=QUIET)
     together = len(calls)
     assert together == N_BATCHES
+    assert sorted(prepared) == ["mug_a", "mug_c"]  # issue 60.4: effnet's reference encodings once a target, not twice
     decoded = _count(monkeypatch, "pin_match.data.frameset.FrameSet.image")
     alone = [score_to_file(tiny_frameset, name, out=tmp_path / "alone", run=QUIET) for name in ("verify", "effnet")]
     assert len(calls) - together == 2 * N_BATCHES and len(decoded) == 2 * 8  # alone: twice the network, twice decoded

@@ -9,7 +9,7 @@ itself stays out of the composite's hash: the same part spelled ``"448"`` or ``4
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import field
 from typing import Any
 
@@ -59,6 +59,19 @@ class CompositeMatcher(Matcher):
 
     def parts(self) -> dict[str, Matcher]:
         return dict(self._parts)
+
+    def share_parts(self, peers: Sequence[Matcher]) -> None:
+        """A part configured as one of the run's other matchers (same class, id and device) becomes that matcher: its
+        ``prepare`` (the reference encodings) then runs once for both, as its results on a batch already do."""
+        for role, part in list(self._parts.items()):
+            twin = next((p for p in peers if p is not self and type(p) is type(part) and p.id == part.id
+                         and p.cfg.device == part.cfg.device), None)
+            if twin is None:
+                continue
+            self._parts[role] = twin
+            for name, value in list(vars(self).items()):  # the attribute a subclass keeps its part under
+                if value is part:
+                    setattr(self, name, twin)
 
     def require_visual(self, where: str = "", error: type[PinMatchError] = ConfigError) -> None:
         """Refuse a part that reads text or the label: a visual composite must see reference views only."""

@@ -206,9 +206,14 @@ class Matcher(ABC):
 
     # ------------------------------------------------------------------ public API
     def prepare(self, target: Target) -> None:
-        """Build everything derived from the target once (prototypes, text features, keypoints)."""
+        """Build everything derived from the target once (prototypes, text features, keypoints). A matcher already
+        prepared for this very target (its content: ``Target.fingerprint``) keeps what it built: a part another
+        matcher of the run shares (``share_parts``) is prepared once for both."""
         if self.modality is not Modality.CATEGORY:
             target = dataclasses.replace(target, category="")  # the label is off limits
+        if self._target is not None and self._target.fingerprint == target.fingerprint:
+            return
+        self._target = None  # a prepare that fails half-way leaves nothing that claims to be prepared
         self._prepare(target)
         self._target = target
 
@@ -245,6 +250,11 @@ class Matcher(ABC):
     def parts(self) -> dict[str, Matcher]:
         """The matchers a composite is built from, by role (their weights are listed by ``pin-match list``)."""
         return {}
+
+    def share_parts(self, peers: Sequence[Matcher]) -> None:
+        """Take the run's other matchers (``peers``) in place of parts configured alike: a composite's job
+        (``matchers.common.composite``); a matcher without parts has none to share."""
+        return None
 
     @property
     def score_scale(self) -> str:

@@ -48,6 +48,8 @@ class PreparedMatchers:
 
     def __init__(self, matchers: Sequence[Matcher], workers: int = 1) -> None:
         self.matchers = list(matchers)
+        for matcher in self.matchers:  # a composite's part configured as another matcher of the run is prepared once
+            matcher.share_parts(self.matchers)
         self.workers = workers
         self.targets: list[str | None] = [None] * len(self.matchers)
         self.pool = ThreadPoolExecutor(max_workers=max(2, workers))
