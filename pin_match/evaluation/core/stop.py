@@ -236,30 +236,29 @@ class LookFurther(StopPolicy):
             return first
         start, end = bounds
         last = end - 1 if self.window is None else min(first.fired + self.window, end - 1)
-        still_open = walk_goes_on and (self.window is None or first.fired + self.window > end - 1)
-        before = np.r_[-np.inf, np.maximum.accumulate(scores[start:end])[:-1]]  # best score of the earlier frames
+        firings = np.flatnonzero(fired[first.fired:last + 1]) + first.fired
+        seen = source[firings]  # non-decreasing: a candidate several firings stand for is one run
+        new = np.ones(len(seen), bool)
+        new[1:] = seen[1:] != seen[:-1]
+        firings, seen = firings[new], seen[new]
+        unplaced = first.unplaced
+        if placeable is not None:
+            keep = np.array([placeable(int(c)) for c in seen])  # the window's first candidate is placeable
+            unplaced += int((~keep).sum())
+            firings, seen = firings[keep], seen[keep]
+        if self.clear is not None:
+            before = np.r_[-np.inf, np.maximum.accumulate(scores[start:end])[:-1]]  # best of the earlier frames
+            cleared = np.flatnonzero(scores[seen] >= before[seen - start] + self.clear)
+            if cleared.size:  # it beats every earlier frame, so every earlier candidate: the best so far
+                k = int(cleared[0])
+                return Decision(first.fired, int(firings[k]), int(seen[k]), _ints(seen[:k + 1]), unplaced)
+        if walk_goes_on and (self.window is None or first.fired + self.window > end - 1):
+            return Decision(first.fired, None, None, _ints(seen), unplaced)
+        return Decision(first.fired, last, int(seen[np.argmax(scores[seen])]), _ints(seen), unplaced)
 
-        def clears(frame: int) -> bool:
-            return self.clear is not None and bool(scores[frame] >= before[frame - start] + self.clear)
 
-        chosen, candidates, unplaced = first.chosen, [first.chosen], first.unplaced
-        if clears(chosen):
-            return Decision(first.fired, first.fired, chosen, (chosen,), unplaced)
-        for t in np.flatnonzero(fired[first.fired + 1:last + 1]) + first.fired + 1:
-            candidate = int(source[t])
-            if candidate in candidates:
-                continue
-            if placeable is not None and not placeable(candidate):
-                unplaced += 1
-                continue
-            candidates.append(candidate)
-            if scores[candidate] > scores[chosen]:
-                chosen = candidate
-            if clears(candidate):
-                return Decision(first.fired, int(t), candidate, tuple(candidates), unplaced)
-        if still_open:
-            return Decision(first.fired, None, None, tuple(candidates), unplaced)
-        return Decision(first.fired, last, chosen, tuple(candidates), unplaced)
+def _ints(values: np.ndarray) -> tuple[int, ...]:
+    return tuple(values.tolist())
 
 
 def one_walk(scores: np.ndarray) -> FrameArrays:
@@ -302,7 +301,11 @@ def latest_counted(arr: FrameArrays, counted: np.ndarray) -> np.ndarray:
 
 def episode_starts(arr: FrameArrays) -> np.ndarray:
     """Index of each episode's first frame (``arr`` is ordered by episode and step)."""
-    return np.flatnonzero(np.r_[True, np.diff(arr.episode) != 0]) if len(arr.score) else np.zeros(0, np.int64)
+    if not len(arr.score):
+        return np.zeros(0, np.int64)
+    change = np.ones(len(arr.episode), bool)
+    change[1:] = arr.episode[1:] != arr.episode[:-1]
+    return np.flatnonzero(change)
 
 
 def house_level(arr: FrameArrays, top: int) -> np.ndarray:
