@@ -351,3 +351,12 @@ def test_oracles_on_the_default_set(default_synth):
     lookalike = metrics_of(episodes_at(ctx.placements(oracle_table(default_synth, "same_category"), "val"), sigma))
     assert target["sr"] == 100.0 and target["ce"] == 0.0
     assert lookalike["ce"] >= 90.0 and lookalike["sr"] == 0.0
+
+
+def test_depth_at_the_sensor_s_far_limit_is_no_depth(walk_set, monkeypatch):
+    """Issue 60.6: a clipping sensor reports everything beyond its range at exactly 5 m; such a point is not placed."""
+    monkeypatch.setattr(FrameSet, "depth", lambda self, frame_id: np.full((SIZE, SIZE), 5.0, np.float32))
+    stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0])
+    assert stop.outcome == "not found" and stop.unplaced_firings == 1
+    monkeypatch.setattr(FrameSet, "depth", lambda self, frame_id: np.full((SIZE, SIZE), 4.99, np.float32))
+    assert stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0]).unplaced_firings == 0

@@ -34,7 +34,7 @@ from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy, ep
 SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
 FORWARD_STEP = 0.25  # metres per forward action
 TURN = math.radians(30.0)  # one turn action
-DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: outside it a pixel has no depth
+DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: below the first or at the second a pixel has no depth
 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
@@ -97,7 +97,7 @@ class Placements:
             py = np.clip(np.floor(xy[:, 1]).astype(np.int64), 0, depth.shape[0] - 1)
             d = depth[py, px].astype(np.float64)
             xyz = self.geometry.back_project(frame_id, xy, d)
-            xyz[(d < DEPTH_RANGE[0]) | (d > DEPTH_RANGE[1])] = np.nan
+            xyz[(d < DEPTH_RANGE[0]) | (d >= DEPTH_RANGE[1])] = np.nan  # a clipping sensor puts its far pixels at 5 m
             roles = self._roles.get(frame_id, {})
             self._points[frame_id] = FramePoints(np.asarray(row["point_scores"], np.float64), xyz,
                                                  np.array([roles.get(int(v), "background") for v in mask[py, px]],
