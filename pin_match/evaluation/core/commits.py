@@ -80,9 +80,9 @@ def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATC
     """PIN's counts and metrics with "matched" read as "found under the policy", plus how long it looked.
 
     ``frames_to_first_match``: the mean, over episodes where something is found, of the 1-based position of the
-    first found frame (for a look-further policy, the frame it commits to); ``frames_looked_at``: the mean 1-based
-    position of the frame where the agent stopped looking and committed (the same for every policy but a
-    look-further one). NaN where nothing is found.
+    first found frame (for a look-further policy, the frame it commits to), NaN where nothing is found;
+    ``frames_looked_at``: ``commit_shares``' (the 1-based frame where the agent committed, the whole walk where it
+    never does).
     """
     arr = as_arrays(scored)
     found = found_frames(arr, sigma, policy)
@@ -93,9 +93,7 @@ def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATC
         out["frames_to_first_match"] = float(np.mean(first - np.searchsorted(arr.episode, arr.episode[first]) + 1))
     else:
         out["frames_to_first_match"] = math.nan
-    stops = [(d.stop, start) for d, (start, _) in zip(policy.decide(arr, sigma), episode_bounds(arr))
-             if d.stop is not None]
-    out["frames_looked_at"] = float(np.mean([stop - start + 1 for stop, start in stops])) if stops else math.nan
+    out["frames_looked_at"] = commit_shares(commitments(arr, sigma, policy))["frames_looked_at"]
     return out
 
 
