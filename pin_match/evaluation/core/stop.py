@@ -158,8 +158,7 @@ class HouseStop(StopPolicy):
             raise PolicyError(f"stop policy {self}: need top >= 1 and a finite margin")
 
     def __str__(self) -> str:
-        window = "" if (self.k, self.n) == (1, 1) else f"@{self.k}-of-{self.n}"
-        return f"house:top{self.top}{self.margin:+g}{window}"
+        return f"house:top{self.top}{self.margin:+g}{_base_suffix(self)}"
 
     @classmethod
     def parse(cls, text: str) -> HouseStop:
@@ -167,7 +166,7 @@ class HouseStop(StopPolicy):
         if not found:
             raise PolicyError(f"stop policy {text!r}: write a house-relative one as house:topT+MARGIN "
                               "(e.g. house:top3+0.1, house:top1-0.05; optionally @K-of-N)")
-        k, n = (int(found.group(3)), int(found.group(4))) if found.group(3) else (1, 1)
+        k, n = _base_window(found, 3)
         return cls(k, n, top=int(found.group(1)), margin=float(found.group(2)))
 
     def level(self, arr: FrameArrays) -> np.ndarray:
@@ -199,8 +198,7 @@ class LookFurther(StopPolicy):
     def __str__(self) -> str:
         window = "rest" if self.window is None else str(self.window)
         clear = "" if self.clear is None else f"+{self.clear:g}"
-        base = "" if (self.k, self.n) == (1, 1) else f"@{self.k}-of-{self.n}"
-        return f"look:{window}{clear}{base}"
+        return f"look:{window}{clear}{_base_suffix(self)}"
 
     @classmethod
     def parse(cls, text: str) -> LookFurther:
@@ -210,7 +208,7 @@ class LookFurther(StopPolicy):
                               "first firing, e.g. look:20), look:W+CLEAR (commit at once to a candidate that beats "
                               "every earlier frame by CLEAR, e.g. look:20+0.1) or look:rest (the whole walk, an upper "
                               "bound); optionally @K-of-N")
-        k, n = (int(found.group(3)), int(found.group(4))) if found.group(3) else (1, 1)
+        k, n = _base_window(found, 3)
         window = None if found.group(1) == "rest" else int(found.group(1))
         return cls(k, n, window=window, clear=None if found.group(2) is None else float(found.group(2)))
 
@@ -255,6 +253,16 @@ class LookFurther(StopPolicy):
         if walk_goes_on and (self.window is None or first.fired + self.window > end - 1):
             return Decision(first.fired, None, None, _ints(seen), unplaced)
         return Decision(first.fired, last, int(seen[np.argmax(scores[seen])]), _ints(seen), unplaced)
+
+
+def _base_suffix(policy: StopPolicy) -> str:
+    """The text of a policy's base window after its own (``@K-of-N``; nothing for 1-of-1)."""
+    return "" if (policy.k, policy.n) == (1, 1) else f"@{policy.k}-of-{policy.n}"
+
+
+def _base_window(found: re.Match, group: int) -> tuple[int, int]:
+    """(k, n) of a parsed ``@K-of-N`` whose K is regex group ``group`` (1-of-1 where it is absent)."""
+    return (int(found.group(group)), int(found.group(group + 1))) if found.group(group) else (1, 1)
 
 
 def _ints(values: np.ndarray) -> tuple[int, ...]:
