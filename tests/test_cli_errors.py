@@ -67,6 +67,9 @@ def bad_arguments(fs: str, tmp: str) -> list[list[str]]:
         ["carry", fs, f"{fs}:no-such-split", "--matcher", "color", "--cache", f"{tmp}/scores"],
         ["carry", fs, fs, "--matcher", "color", "--vary", "stride"],  # no values
         ["carry", fs, fs, "--matcher", "color", "--vary", "no_such_key=1,2"],
+        ["trade", missing, "--matcher", "color", "--out", f"{tmp}/t"],
+        ["trade", fs, "--matcher", "color", "--policy", "look:far", "--out", f"{tmp}/t"],
+        ["score", fs, "--matcher", "color", "--matcher", "color"],
     ]
 
 
