@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+from dataclasses import replace
 
 import numpy as np
 import pandas as pd
@@ -10,10 +11,24 @@ import pytest
 
 from conftest import make_view
 from pin_match.data.frameset import FrameSet
-from pin_match.data.geometry import CameraModel, EpisodeGeometry, GeometryError, Pose, back_project
+from pin_match.data.geometry import (
+    AGENT_RADIUS,
+    CameraModel,
+    EpisodeGeometry,
+    FloorMap,
+    GeometryError,
+    Pose,
+    back_project,
+)
 from pin_match.data.writer import Frame, FrameSetWriter
 from pin_match.evaluation import EvalContext, evaluate, report, tune
-from pin_match.evaluation.core.navigation import NavigationError, episodes_at, metrics_of, navigation_metrics
+from pin_match.evaluation.core.navigation import (
+    STAND_MARGIN,
+    NavigationError,
+    episodes_at,
+    metrics_of,
+    navigation_metrics,
+)
 from pin_match.evaluation.core.sigma import SigmaChoice
 from pin_match.evaluation.core.tables import report_row, side_by_side
 from pin_match.evaluation.core.tuning import TuningError
@@ -21,7 +36,8 @@ from pin_match.scoring.table import ScoreTable
 
 SIZE = 40  # square frames, HFOV 90 degrees: focal 20 px, the centre pixel (20, 20) looks straight ahead
 CENTRE = (20.0, 20.0)
-TARGET, LOOKALIKE, OTHER = (3.0, 0.0, 1.0), (-3.0, 3.0, 1.0), (-6.0, 0.0, 1.0)
+HEIGHT = 0.5  # the camera and every object's centre, metres above the floor: within reach of an agent standing by
+TARGET, LOOKALIKE, OTHER = (3.0, 0.0, HEIGHT), (-3.0, 3.0, HEIGHT), (-6.0, 0.0, HEIGHT)
 # per step: camera position (x, y), yaw, what it looks at and how far (the object at the frame's centre)
 WALK = [((-3.0, 0.0), 0.0, "mug_t", 6.0),  # the target, beyond PIN's 5 m depth: a match here cannot be placed
         ((-3.0, 0.0), math.pi / 2, "mug_l", 3.0),  # the look-alike
@@ -30,12 +46,13 @@ WALK = [((-3.0, 0.0), 0.0, "mug_t", 6.0),  # the target, beyond PIN's 5 m depth:
         ((0.0, 0.0), 0.0, "mug_t", 3.0),  # the target 3 m ahead
         ((1.0, 0.0), 0.0, "mug_t", 2.0)]
 GEODESIC = 6.0
+BACK = AGENT_RADIUS + STAND_MARGIN  # without a floor map the agent stops this far short of the point below the goal
 
 
 @pytest.fixture(scope="module")
 def walk_set(tmp_path_factory) -> FrameSet:
-    """One val episode: a camera 1 m high turning on the spot, then walking at the target; every object 1 m high,
-    seen at the frame's centre against a wall as far as it."""
+    """One val episode: a camera 0.5 m high turning on the spot, then walking at the target; every object 0.5 m
+    high, seen at the frame's centre against a wall as far as it. No floor map: the agent stands ``BACK`` short."""
     w = FrameSetWriter(tmp_path_factory.mktemp("nav") / "walk", camera=CameraModel(90.0))
     for oid, category, colour in (("mug_t", "mug", (200, 30, 30)), ("mug_l", "mug", (30, 30, 200)),
                                   ("ball_o", "ball", (30, 200, 30))):
@@ -49,7 +66,7 @@ def walk_set(tmp_path_factory) -> FrameSet:
         mask[18:23, 18:23] = 1
         depth = np.full((SIZE, SIZE), distance, np.float32)  # a wall at the object's distance behind it
         w.write_frame("e", step, Frame(np.full((SIZE, SIZE, 3), 90, np.uint8), mask, {1: (oid, roles[oid])}, depth,
-                                       Pose(x, y, 1.0, yaw)))
+                                       Pose(x, y, HEIGHT, yaw)))
     return w.close()
 
 
@@ -63,9 +80,14 @@ def table_of(fs: FrameSet, scores: list[float], points=None) -> ScoreTable:
                                                frameset_fingerprint=fs.fingerprint))
 
 
-def stop_of(fs: FrameSet, scores: list[float], sigma: float = 0.5, **kw) -> pd.Series:
+def stop_of(fs: FrameSet, scores: list[float], sigma: float = 0.5, geometry: dict | None = None,
+            **kw) -> pd.Series:
+    """The episode's row; ``geometry`` replaces fields of its ``EpisodeGeometry`` (a floor map, a position)."""
     table = table_of(fs, scores, **kw)
-    return episodes_at(EvalContext(fs).placements(table, "val"), sigma).iloc[0]
+    places = EvalContext(fs).placements(table, "val")
+    if geometry:
+        places.geometry = replace(places.geometry, episodes={"e": replace(places.geometry.episodes["e"], **geometry)})
+    return episodes_at(places, sigma).iloc[0]
 
 
 def test_a_match_on_the_target_3_m_ahead_is_a_success(walk_set):
@@ -74,27 +96,37 @@ def test_a_match_on_the_target_3_m_ahead_is_a_success(walk_set):
     assert stop.outcome == "success" and stop.stop_step == 4 and stop.unplaced_firings == 2
     assert stop.landed_on == "target"
     np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], TARGET, atol=1e-9)
-    assert stop.d2g == pytest.approx(0.0, abs=1e-9)
-    assert stop.steps == 4 + 0 + 12 + 1  # the 4 actions walked, no turn, 3 m in 0.25 m steps, stop
-    assert stop.path == pytest.approx(3.0 + 3.0) and stop.spl == pytest.approx(1.0)  # 6 m walked = the geodesic
+    assert (stop.stand_x, stop.stand_y) == pytest.approx((3.0 - BACK, 0.0))  # on the floor, short of the point
+    assert stop.d2g == pytest.approx(math.hypot(BACK, HEIGHT))
+    assert stop.steps == 4 + 0 + math.ceil((3 - BACK) / 0.25) + 1  # the 4 actions walked, no turn, the walk, stop
+    assert stop.path == pytest.approx(3.0 + 3.0 - BACK) and stop.spl == pytest.approx(1.0)  # under the geodesic
+
+
+def test_spl_is_below_1_for_a_success_whose_path_exceeds_the_geodesic(walk_set):
+    stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], geometry=dict(geodesic_distance=4.0))
+    assert stop.outcome == "success" and stop.path == pytest.approx(6.0 - BACK)
+    assert stop.spl == pytest.approx(4.0 / (6.0 - BACK))
 
 
 def test_a_match_on_the_lookalike_is_a_category_error(walk_set):
     stop = stop_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.2, 0.2])
     assert stop.outcome == "category error" and stop.stop_step == 1 and stop.landed_on == "same_category"
-    assert stop.d2g == pytest.approx(math.hypot(6.0, 3.0))
-    assert stop.steps == 1 + 0 + 12 + 1 and stop.spl == 0.0
+    assert (stop.stand_x, stop.stand_y) == pytest.approx((-3.0, 3.0 - BACK))
+    assert stop.d2g == pytest.approx(math.dist((-3.0, 3.0 - BACK, 0.0), TARGET))
+    assert stop.steps == 1 + 0 + math.ceil((3 - BACK) / 0.25) + 1 and stop.spl == 0.0
 
 
 def test_a_match_elsewhere_is_neither_success_nor_category_error(walk_set):
     stop = stop_of(walk_set, [0.0, 0.0, 0.9, 0.0, 0.0, 0.0])
-    assert stop.outcome == "other stop" and stop.landed_on == "other" and stop.d2g == pytest.approx(9.0)
+    assert stop.outcome == "other stop" and stop.landed_on == "other"
+    assert stop.d2g == pytest.approx(math.dist((-6.0 + BACK, 0.0, 0.0), TARGET))
 
 
-def test_no_match_is_not_found_with_d2g_at_the_walks_end(walk_set):
+def test_no_match_is_not_found_with_d2g_from_where_the_agent_stands(walk_set):
     stop = stop_of(walk_set, [0.1] * len(WALK))
     assert stop.outcome == "not found" and stop.stop_step is None and stop.unplaced_firings == 0
-    assert stop.d2g == pytest.approx(2.0)  # the last pose (1, 0, 1 m high) to the target (3, 0, 1)
+    # measured as a stop's: the agent's position on the floor (1, 0, 0), not its camera, to the target
+    assert (stop.stand_x, stop.stand_y) == (1.0, 0.0) and stop.d2g == pytest.approx(math.hypot(2.0, HEIGHT))
     assert stop.steps == 5 and stop.path == pytest.approx(4.0) and stop.spl == 0.0
 
 
@@ -102,9 +134,60 @@ def test_turns_and_steps_to_a_point_off_the_axis(walk_set):
     # the left edge of step 4's frame at 3 m: 3 m ahead and 3 m to the left, 45 degrees off the heading
     points = [(CENTRE,)] * 4 + [((0.0, 20.0),)] + [(CENTRE,)]
     stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], points=points)
-    np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], (3.0, 3.0, 1.0), atol=1e-9)
+    np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], (3.0, 3.0, HEIGHT), atol=1e-9)
     assert stop.outcome == "other stop" and stop.landed_on == "background"
-    assert stop.steps == 4 + 1 + math.ceil(math.hypot(3, 3) / 0.25) + 1  # one turn leaves 15 degrees
+    assert stop.steps == 4 + 1 + math.ceil((math.hypot(3, 3) - BACK) / 0.25) + 1  # one turn leaves 15 degrees
+
+
+def test_a_goal_on_a_high_shelf_is_out_of_reach_from_the_floor(walk_set):
+    """The target on a shelf 1.4 m high, matched where it is: the point itself is on it (the rule of measuring from
+    the matched point called it a success), but an agent on the floor stands 1.4 m below it at least."""
+    high = (3.0, 0.0, 1.4)
+    points = [(CENTRE,)] * 4 + [((20.0, 20.0 - 20.0 * (1.4 - HEIGHT) / 3.0),)] + [(CENTRE,)]  # the pixel 0.9 m up
+    without_map = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], points=points,
+                          geometry=dict(positions={"mug_t": high, "mug_l": LOOKALIKE, "ball_o": OTHER}))
+    np.testing.assert_allclose([without_map.point_x, without_map.point_y, without_map.point_z], high, atol=1e-9)
+    assert without_map.outcome == "other stop" and without_map.d2g == pytest.approx(math.hypot(BACK, 1.4))
+    shelf = FloorMap(np.ones((100, 40), bool), 0.1, (-5.0, -1.98))  # x from -5 to 5, y from -1.98 to 2.02
+    shelf.free[76:84, 16:24] = False  # the shelf and the agent's radius around it: x 2.6-3.4, y -0.38-0.42
+    with_map = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], points=points,
+                       geometry=dict(floor_map=shelf, positions={"mug_t": high, "mug_l": LOOKALIKE, "ball_o": OTHER}))
+    assert (with_map.stand_x, with_map.stand_y) == pytest.approx((2.95, -0.43))  # the free cell nearest the point
+    assert with_map.outcome == "other stop" and with_map.d2g == pytest.approx(math.dist((2.95, -0.43, 0.0), high))
+    low = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], geometry=dict(floor_map=shelf))  # the target at 0.5 m
+    assert low.outcome == "success" and low.d2g == pytest.approx(math.dist((2.95, -0.43, 0.0), TARGET))
+    assert low.steps == 4 + 0 + math.ceil(math.hypot(2.95, -0.43) / 0.25) + 1
+
+
+def test_the_floor_map_stands_on_the_part_of_the_floor_the_agent_can_walk_to():
+    free = np.zeros((10, 10), bool)
+    free[:4, :] = True  # the part the agent is on: x 0-4
+    free[6:, :] = True  # beyond a wall: x 6-10, nearer the goal
+    floor = FloorMap(free, 1.0)
+    assert tuple(floor.stand(np.array([7.0, 5.0]), np.array([1.0, 5.0]))) == (3.5, 4.5)  # nearer the agent of equals
+    assert tuple(floor.stand(np.array([7.0, 5.0]), np.array([9.0, 5.0]))) == (7.5, 4.5)
+    assert floor.nearest((7.0, 5.5, 0.5), 0.0) == pytest.approx(0.5 * math.sqrt(2))
+    with pytest.raises(GeometryError, match="no standable cell"):
+        FloorMap(np.zeros((3, 3), bool), 1.0)
+
+
+def test_a_floor_map_is_stored_beside_the_episode_and_read_back(walk_set, tmp_path):
+    floor = FloorMap(np.eye(6, 8, dtype=bool), 0.05, (1.0, -2.0))
+    w = FrameSetWriter(tmp_path / "mapped", camera=CameraModel(90.0))
+    w.add_object("o", "mug", "val", [make_view((1, 2, 3))] * 3, ["a", "b", "c"])
+    w.add_episode("e", "val", "s", "o", [], EpisodeGeometry(Pose(0.0, 0.0, 0.0, 0.0), 2.0, {"o": (1.0, 1.0, 0.5)},
+                                                            {}, floor))
+    w.write_frame("e", 0, Frame(np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint16), {}, None,
+                                Pose(0.0, 0.0, 1.0, 0.0)))
+    fs = w.close()
+    read = fs.geometry.episodes["e"].floor_map
+    assert (read.free == floor.free).all() and (read.cell, read.origin) == (0.05, (1.0, -2.0))
+    assert fs.episode_records[0]["floor_map"]["file"] == "maps/e.png"
+    before = fs.fingerprint
+    (fs.root / "maps" / "e.png").write_bytes(b"")
+    with pytest.raises(GeometryError, match=r"episode 'e': floor_map .* missing or empty file .*e\.png"):
+        FrameSet.load(fs.root)
+    assert before != walk_set.fingerprint
 
 
 def test_metrics_are_shares_of_episodes_and_means(walk_set):
@@ -115,8 +198,10 @@ def test_metrics_are_shares_of_episodes_and_means(walk_set):
     m = metrics_of(walks)
     assert m["sr"] == pytest.approx(100 / 3) and m["ce"] == pytest.approx(100 / 3)
     assert m["not_found_pct"] == pytest.approx(100 / 3) and m["spl"] == pytest.approx(100 / 3)
-    assert m["d2g"] == pytest.approx((0.0 + math.hypot(6, 3) + 2.0) / 3)
-    assert m["steps"] == pytest.approx((17 + 14 + 5) / 3)
+    assert m["d2g"] == pytest.approx((math.hypot(BACK, HEIGHT) + math.dist((-3.0, 3.0 - BACK, 0.0), TARGET)
+                                      + math.hypot(2.0, HEIGHT)) / 3)
+    walked = math.ceil((3 - BACK) / 0.25)
+    assert m["steps"] == pytest.approx((4 + walked + 1 + 1 + walked + 1 + 5) / 3)
     ci = navigation_metrics(walks)["ci95"]
     assert ci["sr"][0] <= m["sr"] <= ci["sr"][1] and ci["sr"] != [m["sr"], m["sr"]]
 
@@ -124,7 +209,7 @@ def test_metrics_are_shares_of_episodes_and_means(walk_set):
 def test_evaluate_report_and_tables_carry_the_estimate(walk_set, tmp_path):
     table = table_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9])
     result = report(table, walk_set, tmp_path / "report", sigma=SigmaChoice(0.5, "given", "test"))
-    assert result["metrics"]["sr"] == 100.0 and result["metrics"]["steps"] == 17.0
+    assert result["metrics"]["sr"] == 100.0 and result["metrics"]["steps"] == 4 + math.ceil((3 - BACK) / 0.25) + 1
     assert result["navigation"]["outcomes"] == {"success": 1, "category error": 0, "other stop": 0, "not found": 0}
     assert {"navigation", "navigation_curves"} <= set(result["files"])
     saved = pd.read_csv(result["files"]["navigation"])
@@ -229,6 +314,9 @@ def test_the_synthetic_generator_records_geometry(tmp_path):
         assert e.geodesic_distance == e.geodesic_to[target] > 0
         first = g.pose(f"{record['episode_id']}_0000")
         assert (e.start.x, e.start.y, e.start.yaw) == (first.x, first.y, first.yaw)
+        # issue 59: no start within reach of the target, and the target where an agent on the floor can reach it
+        assert math.dist((e.start.x, e.start.y, 0.0), e.positions[target]) > 1.0 + 0.5
+        assert e.floor_map is not None and e.floor_map.nearest(e.positions[target], e.start.z) <= 0.9 + 0.05
         for d in record["distractors"]:
             if d["object_category"] == record["goals"][0]["object_category"]:
                 gap = np.hypot(*(np.subtract(e.positions[d["object_id"]], e.positions[target])[:2]))
@@ -279,7 +367,7 @@ def test_a_pin_recording_yields_the_same_navigation_columns(walk_set, tmp_path):
     from pin_match.data.importer import import_recording
     from pin_match.pin_agent import FrameRecorder
 
-    recorder = FrameRecorder(tmp_path / "rec", hfov_deg=90.0, camera_height=1.0)
+    recorder = FrameRecorder(tmp_path / "rec", hfov_deg=90.0, camera_height=HEIGHT)
     for record in walk_set.episode_records:
         start = walk_set.geometry.episodes[record["episode_id"]].start
         with recorder.episode(pin_episode(walk_set, record)):

@@ -178,6 +178,9 @@ class FrameSet:
         for object_id in sorted(self.objects.object_id):
             for p in view_files(self.root / OBJECT_IMAGES / object_id):
                 h.update(hashlib.sha256(p.read_bytes()).digest())
+        for record in self.episode_records:  # floor maps, where the producer stored them (a set without keeps its hash)
+            if "floor_map" in record:
+                h.update(hashlib.sha256((self.root / str(record["floor_map"]["file"])).read_bytes()).digest())
         return h.hexdigest()[:16]
 
     def __repr__(self) -> str:

@@ -12,11 +12,19 @@ its own version), the poses as columns of ``frames.parquet`` and, in ``episodes.
 ``start_position`` / ``start_yaw`` / ``info.geodesic_distance`` per episode and ``position`` (and,
 where known, ``geodesic_distance``) per goal and distractor. A frame-set without them loads as
 before; ``missing_reason`` says what a navigation estimate lacks.
+
+Where the producer knows the floor plan (the synthetic generator), an episode also carries its
+``floor_map``: the cells of the floor where an agent of PIN's radius can stand (a PNG under
+``maps/``, 255 = standable, its cell size and origin in the episode's record). PIN's agent stops
+on the floor, beside furniture, never on the object it found; the navigation estimate reads
+where it stands from the map (``FloorMap.stand``), and a recording without one falls back to a
+stated rule (``evaluation.core.navigation``).
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,7 +33,9 @@ import pandas as pd
 
 from pin_match.errors import PinMatchError
 
-GEOMETRY_VERSION = 1
+GEOMETRY_VERSION = 1  # the floor map is optional: a reader of version 1 that ignores it reads the rest unchanged
+AGENT_RADIUS = 0.17  # metres: PIN's agent (its configuration), the body a standable cell must hold
+MAPS = "maps"  # folder of the episodes' floor maps
 POSE_COLUMNS = ("pose_x", "pose_y", "pose_z", "pose_yaw", "pose_pitch")  # metres, metres, metres, radians, radians
 
 
@@ -73,18 +83,90 @@ class Pose:
         return np.array([self.x, self.y, self.z])
 
 
+@dataclass(frozen=True, eq=False)
+class FloorMap:
+    """Where an agent of radius ``agent_radius`` can stand: a grid over the floor, ``free[i, j]`` for the cell whose
+    centre is ``origin + (i + 0.5, j + 0.5) * cell`` (i along x, j along y)."""
+
+    free: np.ndarray
+    cell: float
+    origin: tuple[float, float] = (0.0, 0.0)
+    agent_radius: float = AGENT_RADIUS
+
+    def __post_init__(self) -> None:
+        if self.free.ndim != 2 or self.free.dtype != bool:
+            raise GeometryError(f"a floor map is a 2-d boolean grid, got {self.free.dtype} of shape {self.free.shape}")
+        if not (math.isfinite(self.cell) and self.cell > 0):
+            raise GeometryError(f"floor map cell size {self.cell!r} is not a positive length")
+        if not self.free.any():
+            raise GeometryError("a floor map with no standable cell: the agent could stand nowhere")
+
+    @property
+    def centres(self) -> np.ndarray:
+        """(K, 2) centres of the standable cells."""
+        return (np.argwhere(self.free) + 0.5) * self.cell + np.asarray(self.origin)
+
+    def _components(self) -> np.ndarray:
+        """Each standable cell's connected part of the floor (8-connected), in ``centres``' order."""
+        if "_labels" not in self.__dict__:
+            import cv2
+
+            labels = cv2.connectedComponents(self.free.astype(np.uint8), connectivity=8)[1]
+            self.__dict__["_labels"] = labels[self.free]
+        return self.__dict__["_labels"]
+
+    def stand(self, goal_xy: np.ndarray, eye_xy: np.ndarray) -> np.ndarray:
+        """Where an agent at ``eye_xy`` that walks to ``goal_xy`` stops: the standable cell nearest the goal among
+        those it can walk to (the part of the floor holding the standable cell nearest it), the nearer to it
+        first among equals."""
+        centres, parts = self.centres, self._components()
+        from_eye = np.hypot(*(centres - np.asarray(eye_xy)[:2]).T)
+        reach = parts == parts[int(np.argmin(from_eye))]
+        to_goal = np.hypot(*(centres[reach] - np.asarray(goal_xy)[:2]).T)
+        best = np.flatnonzero(to_goal <= to_goal.min() + 1e-9)
+        return centres[reach][best[int(np.argmin(from_eye[reach][best]))]]
+
+    def nearest(self, xyz: Sequence[float], floor: float) -> float:
+        """The least distance from an agent standing anywhere on the map (on the floor at height ``floor``) to the
+        point ``xyz``: how close PIN's success rule could ever count it."""
+        flat = np.hypot(*(self.centres - np.asarray(xyz[:2], np.float64)).T).min()
+        return float(np.hypot(flat, float(xyz[2]) - floor))
+
+    def record(self, file: str) -> dict:
+        return {"file": file, "cell": self.cell, "origin": [float(v) for v in self.origin],
+                "agent_radius": self.agent_radius}
+
+    def image(self) -> np.ndarray:
+        """The map as stored: rows along y, columns along x, 255 where the agent can stand."""
+        return np.ascontiguousarray(self.free.T).astype(np.uint8) * 255
+
+
+def read_floor_map(root: Path, record: dict, where: str) -> FloorMap:
+    """An episode's ``floor_map`` record and the PNG it names; a missing file or field names the episode."""
+    from pin_match.data.images import read_label_png
+
+    try:
+        grid = read_label_png(root / str(record["file"]))
+        return FloorMap(grid.T > 127, float(record["cell"]), tuple(float(v) for v in record["origin"]),
+                        float(record.get("agent_radius", AGENT_RADIUS)))
+    except (KeyError, TypeError, ValueError) as exc:
+        raise GeometryError(f"{where}: floor_map {record!r} is unreadable: {exc}") from exc
+
+
 @dataclass(frozen=True)
 class EpisodeGeometry:
     """One episode's start, its geodesic length to the target, and where each placed object is.
 
     ``positions``: object id -> centre (x, y, z) in the house frame; ``geodesic_to``: object id ->
-    shortest-path length from the start, where known (the target's is ``geodesic_distance``).
+    shortest-path length from the start, where known (the target's is ``geodesic_distance``). The start
+    is the agent's base: its height is the floor's.
     """
 
     start: Pose
     geodesic_distance: float
     positions: dict[str, tuple[float, float, float]]
     geodesic_to: dict[str, float]
+    floor_map: FloorMap | None = None  # where the agent can stand, where the producer knows the floor plan
 
     def __post_init__(self) -> None:
         for name, value in (("geodesic_distance", self.geodesic_distance), *self.geodesic_to.items()):
@@ -94,10 +176,13 @@ class EpisodeGeometry:
             if len(xyz) != 3 or not all(math.isfinite(float(v)) for v in xyz):
                 raise GeometryError(f"position of object {object_id!r} = {xyz!r} is not three finite numbers")
 
-    def annotate(self, record: dict) -> dict:
-        """An ``episodes.json`` record with this geometry written in (PIN's field names)."""
+    def annotate(self, record: dict, map_file: str | None = None) -> dict:
+        """An ``episodes.json`` record with this geometry written in (PIN's field names; the floor map's record
+        where it is stored in ``map_file``)."""
         out = dict(record, start_position=[self.start.x, self.start.y, self.start.z], start_yaw=self.start.yaw,
                    info={**record.get("info", {}), "geodesic_distance": self.geodesic_distance})
+        if self.floor_map is not None and map_file is not None:
+            out["floor_map"] = self.floor_map.record(map_file)
         for key in ("goals", "distractors"):
             out[key] = [self._object(goal) for goal in record.get(key, [])]
         return out
@@ -112,8 +197,9 @@ class EpisodeGeometry:
         return out
 
 
-def episode_geometry(record: dict, where: str) -> EpisodeGeometry:
-    """The geometry of one ``episodes.json`` record; a missing or impossible field names the episode."""
+def episode_geometry(record: dict, where: str, root: Path | None = None) -> EpisodeGeometry:
+    """The geometry of one ``episodes.json`` record (its floor map read under ``root``); a missing or impossible
+    field names the episode."""
     episode = f"{where}: episode {record.get('episode_id')!r}"
     try:
         sx, sy, sz = (float(v) for v in record["start_position"])
@@ -128,12 +214,17 @@ def episode_geometry(record: dict, where: str) -> EpisodeGeometry:
         target = str(record["goals"][0]["object_id"])
         if target not in positions:
             raise KeyError(f"goals[0].position ({target})")
-        return EpisodeGeometry(start, geodesic, positions, geodesic_to)
     except (KeyError, TypeError, ValueError, IndexError) as exc:
         if isinstance(exc, GeometryError):
             raise GeometryError(f"{episode}: {exc}") from exc
         raise GeometryError(f"{episode} lacks geometry field {exc} or holds a malformed one (see docs/frameset.md, "
                             "'Geometry')") from exc
+    floor_map = None if root is None or "floor_map" not in record else \
+        read_floor_map(root, record["floor_map"], episode)
+    try:
+        return EpisodeGeometry(start, geodesic, positions, geodesic_to, floor_map)
+    except GeometryError as exc:
+        raise GeometryError(f"{episode}: {exc}") from exc
 
 
 @dataclass(frozen=True)
@@ -190,7 +281,7 @@ def read_geometry(root: Path, manifest: dict, frames: pd.DataFrame, records: lis
     except (KeyError, TypeError, ValueError) as exc:
         raise GeometryError(f"{where}: geometry lacks a numeric 'hfov_deg' ({exc})") from exc
     poses = _poses(root / "frames.parquet", frames)
-    episodes = {str(r["episode_id"]): episode_geometry(r, str(root / "episodes.json")) for r in records}
+    episodes = {str(r["episode_id"]): episode_geometry(r, str(root / "episodes.json"), root) for r in records}
     return Geometry(camera, poses, episodes)
 
 

@@ -36,7 +36,7 @@ from pin_match.data.frameset import (
     FrameSet,
     FrameSetError,
 )
-from pin_match.data.geometry import POSE_COLUMNS, CameraModel, EpisodeGeometry, GeometryError, Pose
+from pin_match.data.geometry import MAPS, POSE_COLUMNS, CameraModel, EpisodeGeometry, GeometryError, Pose
 
 VISIBILITY_COLUMNS = ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1", "depth"]
 
@@ -236,13 +236,17 @@ class FrameSetWriter:
             self.add_geometry(episode_id, geometry)
 
     def add_geometry(self, episode_id: str, geometry: EpisodeGeometry) -> None:
-        """An episode's start, geodesic lengths and object positions (a renderer knows them once it has placed
-        the objects); a writer with a camera needs them for every episode by ``close``."""
+        """An episode's start, geodesic lengths, object positions and floor map (a renderer knows them once it has
+        placed the objects); a writer with a camera needs them for every episode by ``close``."""
         if self.camera is None:
             raise GeometryError(f"episode {episode_id!r}: geometry given to a writer without a camera (pass camera=)")
         if episode_id not in self._episodes:
             raise FrameSetError(f"geometry of unknown episode id {episode_id!r}")
-        self._episodes[episode_id] = geometry.annotate(self._episodes[episode_id])
+        map_file = None
+        if geometry.floor_map is not None:
+            map_file = f"{MAPS}/{episode_id}.png"
+            atomic.write_image(self.staging / map_file, geometry.floor_map.image())
+        self._episodes[episode_id] = geometry.annotate(self._episodes[episode_id], map_file)
         self._geometry.add(episode_id)
 
     def roles(self, episode_id: str) -> dict[str, str]:

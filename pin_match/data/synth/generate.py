@@ -27,11 +27,13 @@ from pin_match.data.synth.scene import Room, make_room, place_objects
 from pin_match.data.synth.sensor import develop_view, house_camera, reference_camera
 from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.size import DEFAULT_SIZE, SynthSize
-from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk, geodesic_lengths
+from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk, floor_map, geodesic_lengths
 from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 5  # 5: PIN's distractor counts, clutter, a camera model, products facing the room, equal runs
+GENERATOR_VERSION = 6  # 6: the target and look-alikes within an agent's reach, starts away from the target, floor maps
+REACH = 0.9  # metres: the farthest from an agent standing beside it a target or look-alike's centre may be (PIN's 1 m
+# success distance less a margin, since the agent stops beside the point it matched, not beside the centre)
 SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
 OTHER_RANGE, PIN_OTHER = (4, 10), 7.19  # other-category ones: at most 10, 7.19 on average (PIN's supplementary)
 
@@ -146,14 +148,20 @@ def _camera_pose(pose: Pose) -> CameraPose:
 
 def _episode_geometry(plan: EpisodePlan, room, obstacles, walk: list[Pose],
                       centres: list[tuple[float, float, float]]) -> EpisodeGeometry:
-    """Where the walk starts, every placed object's centre, and the geodesic length to the target and to each
-    same-category look-alike."""
+    """Where the walk starts, every placed object's centre, the geodesic length to the target and to each
+    same-category look-alike, and where an agent can stand."""
     ids = [spec.object_id for spec in plan.objects]
     measured = [k for k, role in enumerate(plan.roles) if role in ("target", "same_category")]
     lengths = geodesic_lengths(room, obstacles, walk[0][:2], [centres[k][:2] for k in measured])
     x, y, yaw, _ = walk[0]
     return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, centres)),
-                           {ids[k]: length for k, length in zip(measured, lengths)})
+                           {ids[k]: length for k, length in zip(measured, lengths)}, floor_map(room, obstacles))
+
+
+def _within_reach(room: Room):
+    """Whether an agent standing on the room's floor, beside its furniture, gets within ``REACH`` of a point."""
+    standing = floor_map(room, room.footprints)
+    return lambda x, y, z: standing.nearest((x, y, z), 0.0) <= REACH
 
 
 @dataclass
@@ -183,7 +191,7 @@ def _stage(r: Renderer, room: Room, plan: EpisodePlan, rng: np.random.Generator)
     built += [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.clutter)]
     sizes = [_footprint(mesh) for mesh, _ in built]
     lookalikes = frozenset(k for k, role in enumerate(plan.roles) if role == "same_category")
-    spots = place_objects(room, sizes, rng, lookalikes)
+    spots = place_objects(room, sizes, rng, lookalikes, _within_reach(room))
     stage = _Stage(np.zeros(0, np.uint16), {}, {"target": [], "same_category": []}, {}, list(room.footprints), [])
     values = {}  # body id -> mask value, for the episode's objects only
     for k, ((mesh, atlas), (x, y, z, yaw)) in enumerate(zip(built, spots)):

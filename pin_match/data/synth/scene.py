@@ -7,6 +7,7 @@ and kept away from the room's middle so the camera walk always has space.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -246,8 +247,12 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> N
         room.footprints.append(rect)
 
 
+Reach = Callable[[float, float, float], bool]  # whether an agent on the floor gets close enough to a point x, y, z
+
+
 def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.random.Generator,
-                  lookalikes: frozenset[int] = frozenset()) -> list[tuple[float, float, float, float]]:
+                  lookalikes: frozenset[int] = frozenset(), reach: Reach | None = None,
+                  ) -> list[tuple[float, float, float, float]]:
     """Stand objects (radius, height, side area) on free spots of the room's surfaces: (x, y, z, yaw) each.
 
     Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
@@ -273,14 +278,25 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     (``FRONT_AZIMUTH`` of the object) is turned to where its furniture's front looks, or away from
     the wall it stands against, give or take ``FACE_SPREAD``; on a rug, which has no front, the
     yaw is uniform.
+
+    With ``reach``, the target and its look-alikes stand only where it holds for their centre (an
+    agent standing on the floor beside the furniture can come within PIN's success distance of them),
+    as PIN's episodes place the objects an agent must reach; where no spot passes, the rule is
+    dropped for that object rather than the episode.
     """
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
     for k, (radius, height, side_area) in enumerate(sizes):
         away = (taken[0][0], taken[0][1], LOOKALIKE_GAP) if k in lookalikes and taken else None
-        spot = _spot(room, (radius, height, side_area), taken, rng, away)
-        if spot is None and away is not None:
-            spot = _spot(room, (radius, height, side_area), taken, rng, None)
+        near = None
+        if reach is not None and (k == 0 or k in lookalikes):
+            def near(x: float, y: float, z: float, half: float = height / 2) -> bool:
+                return reach(x, y, z + half)
+        spot = None
+        for keep_away, keep_near in dict.fromkeys([(away, near), (None, near), (away, None), (None, None)]):
+            spot = _spot(room, (radius, height, side_area), taken, rng, keep_away, keep_near)
+            if spot is not None:
+                break
         if spot is None:
             raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
                              f"{room.width:.1f} x {room.depth:.1f} m room")
@@ -296,7 +312,7 @@ Spot = tuple[float, float, float, float | None]  # x, y, z and the direction the
 
 
 def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float, float, float, float]],
-          rng: np.random.Generator, away: Away) -> Spot | None:
+          rng: np.random.Generator, away: Away, near: Reach | None = None) -> Spot | None:
     """A surface spot (a high one first for a small product), else the floor along a wall; None if neither."""
     radius, height, side_area = size
     weights = np.array([np.sqrt(s.area) for s in room.surfaces])
@@ -305,26 +321,27 @@ def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float,
                      and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
     spot = None
     if side_area < SMALL_AREA:
-        spot = _surface_spot(room, weights * fits * high, radius, taken, rng, away)
-    spot = spot or _surface_spot(room, weights * fits, radius, taken, rng, away)
+        spot = _surface_spot(room, weights * fits * high, radius, taken, rng, away, near)
+    spot = spot or _surface_spot(room, weights * fits, radius, taken, rng, away, near)
     if spot is None:
-        floor = _floor_spot(room, radius, taken, rng, away)
+        floor = _floor_spot(room, radius, taken, rng, away, near)
         spot = None if floor is None else (floor[0], floor[1], 0.0, floor[2])
     return spot
 
 
-def _far(x: float, y: float, away: Away) -> bool:
-    return away is None or np.hypot(x - away[0], y - away[1]) >= away[2]
+def _allowed(x: float, y: float, z: float, away: Away, near: Reach | None) -> bool:
+    """Far enough from what ``away`` names, and within reach where ``near`` asks it, of a spot on a surface at z."""
+    return (away is None or np.hypot(x - away[0], y - away[1]) >= away[2]) and (near is None or near(x, y, z))
 
 
 def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
-                  rng: np.random.Generator, away: Away = None) -> Spot | None:
-    """A free spot (x, y, z, facing) on a surface drawn with weights ``p``, clear of the objects already placed; or
-    None."""
+                  rng: np.random.Generator, away: Away = None, near: Reach | None = None) -> Spot | None:
+    """A free spot (x, y, z, facing) on a surface drawn with weights ``p``, clear of the objects already placed and
+    where ``near`` holds; or None."""
     for _ in range(200 if p.sum() else 0):
         s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
         x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
-        if _far(x, y, away) and all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
+        if _allowed(x, y, s.z, away, near) and all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
                                     for ox, oy, z, r in taken):
             return float(x), float(y), float(s.z), s.facing
     return None
@@ -341,7 +358,8 @@ WALL_FACING = (np.pi / 2, -np.pi / 2, 0.0, np.pi)  # into the room from the wall
 
 
 def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float, float]],
-                rng: np.random.Generator, away: Away = None, tries: int = 500) -> tuple[float, float, float] | None:
+                rng: np.random.Generator, away: Away = None, near: Reach | None = None,
+                tries: int = 500) -> tuple[float, float, float] | None:
     """A free floor position (x, y, the direction into the room from its wall) for an object of ``radius``, clear of
     furniture and other objects; None if none.
 
@@ -358,7 +376,7 @@ def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float
                 continue
             if _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.05):
                 continue
-            if _far(x, y, away) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
-                                        for ox, oy, z, r in taken):
+            if _allowed(x, y, 0.0, away, near) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
+                                                       for ox, oy, z, r in taken):
                 return float(x), float(y), WALL_FACING[wall]
     return None

@@ -29,12 +29,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pin_match.data.geometry import AGENT_RADIUS, FloorMap
 from pin_match.data.synth.scene import Room
 
 CAMERA_HEIGHT = 1.31
 STEP = 0.25
 TURN = np.radians(30)
 CELL = 0.1
+MAP_CELL = 0.05  # the stored floor map's cell: finer than the walk's, since a stop beside furniture is measured on it
+START_AWAY = 2.0  # metres of walk at least from the start to the target: PIN's 1 m success distance and as much again
 CLEARANCE = 0.3  # the camera body's radius while exploring
 NEAR_CLEARANCE = 0.1  # how close to furniture the camera may stand when it stops beside an object
 FOCAL_PX = 469.0  # the frame's focal length in pixels (360 px wide, HFOV 42 degrees)
@@ -66,19 +69,31 @@ class Goal:
 Pose = tuple[float, float, float, float]  # x, y, yaw, pitch (radians)
 
 
+def standable(room: Room, obstacles: list[tuple[float, float, float, float]], clearance: float,
+              cell: float) -> np.ndarray:
+    """Cells of ``cell`` metres ([i, j]: x, y) whose centre is at least ``clearance`` from the walls and from every
+    obstacle rectangle (x0, y0, x1, y1): where a body of that radius fits."""
+    xs = (np.arange(int(room.width / cell)) + 0.5) * cell
+    ys = (np.arange(int(room.depth / cell)) + 0.5) * cell
+    X, Y = np.meshgrid(xs, ys, indexing="ij")
+    free = (X > clearance) & (X < room.width - clearance) & (Y > clearance) & (Y < room.depth - clearance)
+    for x0, y0, x1, y1 in obstacles:
+        free &= ~((X > x0 - clearance) & (X < x1 + clearance) & (Y > y0 - clearance) & (Y < y1 + clearance))
+    return free
+
+
+def floor_map(room: Room, obstacles: list[tuple[float, float, float, float]]) -> FloorMap:
+    """Where PIN's agent (its radius) can stand in the room, at ``MAP_CELL``: what the navigation estimate reads."""
+    return FloorMap(standable(room, obstacles, AGENT_RADIUS, MAP_CELL), MAP_CELL)
+
+
 class Grid:
     """Free cells of the room for a camera body of radius ``clearance``."""
 
     def __init__(self, room: Room, obstacles: list[tuple[float, float, float, float]],
                  clearance: float = CLEARANCE) -> None:
-        self.nx, self.ny = int(room.width / CELL), int(room.depth / CELL)
-        xs = (np.arange(self.nx) + 0.5) * CELL
-        ys = (np.arange(self.ny) + 0.5) * CELL
-        X, Y = np.meshgrid(xs, ys, indexing="ij")
-        free = (X > clearance) & (X < room.width - clearance) & (Y > clearance) & (Y < room.depth - clearance)
-        for x0, y0, x1, y1 in obstacles:
-            free &= ~((X > x0 - clearance) & (X < x1 + clearance) & (Y > y0 - clearance) & (Y < y1 + clearance))
-        self.free = free
+        self.free = standable(room, obstacles, clearance, CELL)
+        self.nx, self.ny = self.free.shape
 
     def centre(self, cell: tuple[int, int]) -> np.ndarray:
         return (np.array(cell) + 0.5) * CELL
@@ -105,7 +120,22 @@ class Grid:
         unreachable (Dijkstra)."""
         dist = np.full(self.free.shape, np.inf)
         dist[start] = 0.0
-        queue = [(0.0, start)]
+        return self._relax(dist, [(0.0, start)])
+
+    def lengths_to(self, xy: tuple[float, float], reach: float = 1.5) -> np.ndarray:
+        """The walk from every cell to a point that may stand off the floor (on furniture): the straight stretch
+        from a free cell within ``reach`` of it, then the shortest walk; inf where no such cell is reachable."""
+        cells = np.argwhere(self.free)
+        straight = np.hypot(*((cells + 0.5) * CELL - np.asarray(xy)).T)
+        dist = np.full(self.free.shape, np.inf)
+        queue = []
+        for (i, j), d in zip(cells[straight <= reach], straight[straight <= reach]):
+            dist[i, j] = d
+            queue.append((float(d), (int(i), int(j))))
+        heapq.heapify(queue)
+        return self._relax(dist, queue)
+
+    def _relax(self, dist: np.ndarray, queue: list[tuple[float, tuple[int, int]]]) -> np.ndarray:
         while queue:
             d, c = heapq.heappop(queue)
             if d > dist[c]:
@@ -169,7 +199,7 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
     """
     grid = Grid(room, obstacles)
     near = Grid(room, obstacles, NEAR_CLEARANCE)
-    start, reachable = _start(grid, rng)
+    start, reachable = _start(grid, rng, (target.x, target.y))
     walk = _Walk(grid, near, reachable, rng, grid.centre(start), float(rng.uniform(-np.pi, np.pi)), sight)
     walk.look_around(int(rng.integers(3, 7)))
     walk.explore(n_frames - APPROACH_FRAMES)
@@ -192,14 +222,25 @@ def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, floa
     return [float(np.min(walked + np.hypot(centres[:, 0] - g[0], centres[:, 1] - g[1]))) for g in goals]
 
 
-def _start(grid: Grid, rng: np.random.Generator) -> tuple[tuple[int, int], np.ndarray]:
-    """A start cell in a large connected part of the floor, and the cells reachable from it."""
+def _start(grid: Grid, rng: np.random.Generator, target: tuple[float, float]) -> tuple[tuple[int, int], np.ndarray]:
+    """A start cell in a large connected part of the floor, and the cells reachable from it.
+
+    Never within reach of the target: a start cell lies ``START_AWAY`` or more of walk from it (straight
+    distance where the target's cell reaches no free cell), drawn with weight its distance, so the farther
+    corners of the room, where PIN's long episodes would start, come first. A room too small for that
+    starts at its farthest cell.
+    """
     cells = np.argwhere(grid.free)
     if not len(cells):
         raise ValueError("room has no free floor for the camera")
+    walked = grid.lengths_to(target)[cells[:, 0], cells[:, 1]]
+    away = np.where(np.isfinite(walked), walked, np.hypot(*((cells + 0.5) * CELL - np.asarray(target)).T))
+    far = np.flatnonzero(away >= START_AWAY)
+    weights = away[far] / away[far].sum() if len(far) else None
     reach: dict = {}
     for _ in range(20):
-        start = tuple(int(v) for v in cells[rng.integers(len(cells))])
+        k = int(rng.choice(far, p=weights)) if len(far) else int(np.argmax(away))
+        start = tuple(int(v) for v in cells[k])
         reach = grid.bfs(start)
         if len(reach) > 0.3 * len(cells):
             break

@@ -5,12 +5,17 @@ with it (the paper's DINO: the lowest CM, yet SR 4.02). Without a simulator, the
 recorded stands in for the agent's exploration: it is followed unchanged until the stop policy
 fires on a frame whose matched points can be placed in the house (depth in PIN's sensor range);
 the matched points are back-projected with the frame's depth, pose and camera, and the agent walks
-straight to their median, where it stops. Success: that point within PIN's success distance of
-the target; category error: within it of a same-category look-alike instead; D2G: its distance
-to the target; Steps: the actions walked to the stop frame, the turns and forward steps to the
-point, and the stop; SPL: success x geodesic / max(path, geodesic). A walk on which the policy
-never fires on a placeable frame is "not found": a failure, D2G from the walk's last pose, Steps
-the walk's. Assumptions and the paper's definitions: docs/metrics.md, "Navigation".
+straight toward their median (the goal point) and stops where an agent of PIN's radius can stand:
+on the floor, on the standable cell nearest the goal point where the frame-set has a floor map
+(``FloorMap.stand``), else on the floor below the goal point pulled back toward the agent by its
+radius and ``STAND_MARGIN``. Every outcome is measured from where the agent stands, on the floor,
+as PIN measures it (the Euclidean distance from the agent's position to the target's): success
+within PIN's success distance of the target; category error within it of a same-category
+look-alike instead; D2G its distance to the target; Steps the actions walked to the stop frame,
+the turns and forward steps to the standing point, and the stop; SPL success x geodesic /
+max(path, geodesic). A walk on which the policy never fires on a placeable frame is "not found":
+a failure, D2G from where the agent stands at the walk's end, Steps the walk's. Assumptions and
+the paper's definitions: docs/metrics.md, "Navigation".
 
 Pure functions of a score table, its frame-set (geometry, depth, masks) and a stop policy;
 ``Placements`` reads each frame's depth at its points once and serves every sigma.
@@ -25,7 +30,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.data.frameset import FrameSet
-from pin_match.data.geometry import EpisodeGeometry, Geometry
+from pin_match.data.geometry import AGENT_RADIUS, EpisodeGeometry, Geometry
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.intervals import Clusters, per_episode_intervals
 from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
@@ -35,13 +40,14 @@ SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
 FORWARD_STEP = 0.25  # metres per forward action
 TURN = math.radians(30.0)  # one turn action
 DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: below the first or at the second a pixel has no depth
+STAND_MARGIN = 0.1  # metres: without a floor map the agent stops this far beyond its radius short of the goal point
 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
-                   "landed_on", "point_x", "point_y", "point_z", "d2g", "path", "geodesic", "spl", "steps",
-                   "unplaced_firings", "fired_step", "candidates"]
+                   "landed_on", "point_x", "point_y", "point_z", "stand_x", "stand_y", "d2g", "path", "geodesic", "spl",
+                   "steps", "unplaced_firings", "fired_step", "candidates"]
 
 
 class NavigationError(PinMatchError, ValueError):
@@ -159,9 +165,10 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
         return _stop(places, geometry, episode_id, target_id, decision, placed[decision.chosen])  # type: ignore[arg-type]
     last = end - 1
     target = np.asarray(geometry.positions[target_id])
-    position = np.r_[places.xy[last], places.geometry.pose(places.frame_ids[last]).z]
+    position = np.r_[places.xy[last], geometry.start.z]  # where it stands when the walk ends, on the floor
     return dict(episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None,
                 stop_step=None, point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None,
+                stand_x=float(position[0]), stand_y=float(position[1]),
                 d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]),
                 geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]),
                 unplaced_firings=decision.unplaced, fired_step=None, candidates=0)
@@ -169,19 +176,21 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
           placed: tuple[np.ndarray, str]) -> dict:
-    """The walk from where the agent stopped looking (``decision.stop``) straight to the committed point."""
+    """The walk from where the agent stopped looking (``decision.stop``) straight to where it stands beside the
+    committed point."""
     t, source = int(decision.stop), int(decision.chosen)  # type: ignore[arg-type]  # a committed decision
     point, landed_on = placed
+    stand = standing_point(geometry, point, places.xy[t])
     target = np.asarray(geometry.positions[target_id])
-    d2g = float(np.linalg.norm(point - target))
+    d2g = float(np.linalg.norm(stand - target))
     same = [np.asarray(xyz) for oid, xyz in geometry.positions.items()
             if oid != target_id and places.category[oid] == places.category[target_id]]
-    near_same = any(np.linalg.norm(point - xyz) <= SUCCESS_DISTANCE for xyz in same)
+    near_same = any(np.linalg.norm(stand - xyz) <= SUCCESS_DISTANCE for xyz in same)
     outcome = "success" if d2g <= SUCCESS_DISTANCE else "category error" if near_same else "other stop"
-    ahead = point[:2] - places.xy[t]
-    heading = math.atan2(ahead[1], ahead[0])
-    turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
+    ahead = stand[:2] - places.xy[t]
     distance = float(np.hypot(*ahead))
+    heading = math.atan2(ahead[1], ahead[0]) if distance > 1e-9 else float(places.yaw[t])
+    turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
     turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
     steps = int(places.steps[t]) + turns + math.ceil(distance / FORWARD_STEP) + 1
     path = float(places.walked[t]) + distance
@@ -190,9 +199,25 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
     return dict(episode_id=episode_id, target_object_id=target_id, outcome=outcome,
                 stop_frame_id=str(places.frame_ids[t]), stop_step=int(places.steps[t]),
                 point_frame_id=str(places.frame_ids[source]), landed_on=landed_on, point_x=float(point[0]),
-                point_y=float(point[1]), point_z=float(point[2]), d2g=d2g, path=path, geodesic=geodesic, spl=spl,
+                point_y=float(point[1]), point_z=float(point[2]), stand_x=float(stand[0]), stand_y=float(stand[1]),
+                d2g=d2g, path=path, geodesic=geodesic, spl=spl,
                 steps=steps, unplaced_firings=decision.unplaced, fired_step=int(places.steps[int(decision.fired)]),
                 candidates=len(decision.candidates))
+
+
+def standing_point(geometry: EpisodeGeometry, goal: np.ndarray, eye_xy: np.ndarray) -> np.ndarray:
+    """Where an agent at ``eye_xy`` (x, y) that walks to the goal point stops, on the floor: the standable cell
+    nearest the goal on the episode's floor map; without a map, the floor below the goal pulled back toward the
+    agent by its radius and ``STAND_MARGIN`` (where it stands already when the goal is nearer than that)."""
+    goal_xy, eye_xy = np.asarray(goal[:2], np.float64), np.asarray(eye_xy[:2], np.float64)
+    if geometry.floor_map is not None:
+        xy = geometry.floor_map.stand(goal_xy, eye_xy)
+    else:
+        back = AGENT_RADIUS + STAND_MARGIN
+        ahead = goal_xy - eye_xy
+        distance = float(np.hypot(*ahead))
+        xy = eye_xy if distance <= back else goal_xy - ahead / distance * back
+    return np.r_[xy, geometry.start.z]
 
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
