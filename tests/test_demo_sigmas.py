@@ -6,6 +6,8 @@ still runs (it tunes on the train split again, minutes longer) and this test say
 
 from __future__ import annotations
 
+from dataclasses import replace
+
 import pytest
 
 from pin_match.evaluation.flows.demo import DEMO_SETS, shipped_sigmas
@@ -48,8 +50,6 @@ def _built(root, provenance: dict, shade: int):
 def test_shipped_sigmas_follow_the_set_s_definition_not_its_bytes(tmp_path):
     """Issue 60.1: the same definition with other frame bytes gets the shipped sigmas; another seed, another
     generator version or another matcher id does not, and the line says why."""
-    from dataclasses import replace
-
     from pin_match import atomic
     from pin_match.contract.registry import create_matcher
     from pin_match.evaluation.flows.demo import SCANNED, set_definition
@@ -70,3 +70,52 @@ def test_shipped_sigmas_follow_the_set_s_definition_not_its_bytes(tmp_path):
         assert path is None and f"another definition of the set ({word})" in why and "--tune" in why
     path, why = shipped_sigmas(replace(demo_set, matchers=("color", "sift")), there)
     assert path is None and f"not for {create_matcher('sift').id}" in why
+
+
+def _val_only(root, provenance: dict, shade: int, frames: int = 2):
+    """``_built``'s val episode alone, as the demo renders it when the sigmas are shipped."""
+    import numpy as np
+
+    from conftest import make_view
+    from pin_match.data.writer import Frame, FrameSetWriter
+
+    w = FrameSetWriter(root, "demo-like", provenance=provenance | {"splits": ["val"]})
+    w.add_object("mug_b", "mug", "val", [make_view((200, 30, 30))] * 3, [f"mug_b {k}" for k in range(3)])
+    w.add_episode("ep_val", "val", "house", "mug_b", [])
+    for step in range(frames):
+        mask = np.zeros((64, 48), np.uint16)
+        mask[10:20, 10:20] = 1
+        w.write_frame("ep_val", step, Frame(np.full((64, 48, 3), shade + step, np.uint8), mask,
+                                            {1: ("mug_b", "target")}))
+    return w.close()
+
+
+def test_the_val_split_alone_of_the_same_definition_gets_the_shipped_sigmas(tmp_path):
+    """Issue 60.2: the demo renders the val split alone when its sigmas are shipped; that split is the whole set's,
+    so the whole set's table applies, and a val split of another length does not."""
+    from pin_match import atomic
+    from pin_match.contract.registry import create_matcher
+    from pin_match.evaluation.flows.demo import SCANNED, set_definition
+
+    provenance = dict(generator="pin_match.data.synth", version=6, seed=0, episodes=2)
+    whole = _built(tmp_path / "whole", provenance, 90)
+    shipped = tmp_path / "shipped.json"
+    atomic.write_json(shipped, dict(definition=set_definition(whole),
+                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
+    demo_set = replace(SCANNED, matchers=("color",), sigmas=str(shipped))
+    assert shipped_sigmas(demo_set, _val_only(tmp_path / "val", provenance, 91))[0] == shipped
+    path, why = shipped_sigmas(demo_set, _val_only(tmp_path / "longer", provenance, 91, frames=3))
+    assert path is None and "another definition of the set (val)" in why
+
+
+@pytest.mark.slow
+def test_a_split_rendered_alone_has_the_whole_set_s_bytes(tmp_path):
+    from pin_match.data.synth import SynthSize, generate
+
+    size = SynthSize(seed=3, episodes=2, objects_per_family=2, frames_per_episode=6)
+    whole = generate(tmp_path / "whole", size, workers=1)
+    alone = generate(tmp_path / "alone", replace(size, splits=("val",)), workers=1)
+    assert set(alone.episodes.split) == {"val"} and alone.manifest["provenance"]["splits"] == ["val"]
+    val = whole.frames[whole.frames.split == "val"]
+    assert list(alone.frames.sha256) == list(val.sha256)
+    assert set(alone.objects.object_id) == set(whole.objects[whole.objects.split == "val"].object_id)

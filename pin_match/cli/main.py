@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 from pin_match import outputs
@@ -24,6 +25,7 @@ from pin_match.cli.args import (
     run_options,
 )
 from pin_match.data.synth import SynthSize
+from pin_match.data.synth.size import PRESETS
 from pin_match.errors import PinMatchError
 
 IMPORT_HELP = """Build a frame-set from a PIN recording and the PInNED objects folder.
@@ -46,8 +48,9 @@ that use it (an object used by train and val episodes is an error).
 def _cmd_synth(a: argparse.Namespace) -> None:
     from pin_match.data.synth import generate
 
-    size = SynthSize(**{k: v for k, v in dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
-                                              objects_per_family=a.objects_per_family).items() if v is not None})
+    given = dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
+                 objects_per_family=a.objects_per_family)
+    size = replace(PRESETS[a.preset], **{k: v for k, v in given.items() if v is not None})
     fs = generate(a.out, size, scans=a.scans, workers=a.workers, overwrite=a.overwrite,
                   progress=run_options(a).progress)
     print(f"wrote {fs}")
@@ -95,6 +98,9 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                                      "every other source: `pin-match data`)")
     s.add_argument("out", type=Path, help="frame-set folder to create")
     default = SynthSize()
+    s.add_argument("--preset", choices=sorted(PRESETS), default="default",
+                   help="named sizes the options below override: 'default' the embedded default set (30 episodes), "
+                        "'bench' 200 episodes (100 val: SR intervals of about +-10 points; docs/performance.md)")
     s.add_argument("--seed", type=int, help=f"generator seed (default {default.seed}); same seed and sizes, same bytes")
     s.add_argument("--episodes", type=int, help=f"episodes, half train and half val (default {default.episodes})")
     s.add_argument("--objects-per-family", type=int, help="at most this many instances of a look-alike family in "

@@ -242,9 +242,21 @@ def render_episode(plan: EpisodePlan) -> tuple[list[FrameRecord], EpisodeGeometr
 
 
 # ------------------------------------------------------------------ entry point
+def _check(size: SynthSize) -> None:
+    if size.episodes < 2:
+        raise SynthError(f"episodes must be at least 2 (one train, one val), got {size.episodes}")
+    if size.frames_per_episode < 1:
+        raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
+    if not size.splits or set(size.splits) - {"train", "val"}:
+        raise SynthError(f"splits {list(size.splits)}: render 'train', 'val' or both")
+
+
 def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Path | None = None,
              workers: int | None = None, overwrite: bool = False, progress: bool = False) -> FrameSet:
     """Write a complete synthetic PIN-like frame-set to ``out`` and return it loaded.
+
+    ``size.splits`` renders only some splits (the demo's val split, when its sigmas are shipped):
+    every episode is planned as in the whole set, so a split rendered alone has the whole set's bytes.
 
     ``scans`` is a scan folder (``pin-match data prepare gso``; default: the scans shipped with
     pin_match) whose ``families.csv`` names the families. ``workers`` processes (default: all
@@ -254,17 +266,17 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
     from tqdm import tqdm
 
     seed = size.seed
-    if size.episodes < 2:
-        raise SynthError(f"episodes must be at least 2 (one train, one val), got {size.episodes}")
-    if size.frames_per_episode < 1:
-        raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
+    _check(size)
     folder = ScanFolder.open(PACKAGED_SCANS if scans is None else scans)
     specs = make_objects(folder, size.objects_per_family)
+    rendered_specs = [s for s in specs if s.split in size.splits]
     provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
                       objects_per_family=size.objects_per_family, frames_per_episode=size.frames_per_episode,
                       scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
+    if set(size.splits) != {"train", "val"}:  # planned as the whole set, so its episodes are the whole set's bytes
+        provenance["splits"] = sorted(size.splits)
     writer = FrameSetWriter(out, Path(out).name, overwrite=overwrite, provenance=provenance,
                             camera=CameraModel(HFOV))
     with writer:
@@ -272,13 +284,15 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
         pool = mp.get_context("spawn").Pool(workers) if workers > 1 else None
         try:
             imap = pool.imap if pool else map
-            rendered = tqdm(imap(partial(render_object, seed=seed), specs), total=len(specs), desc="render objects",
-                            unit="object", disable=not progress, dynamic_ncols=True)
-            for spec, views in zip(specs, rendered):
+            rendered = tqdm(imap(partial(render_object, seed=seed), rendered_specs), total=len(rendered_specs),
+                            desc="render objects", unit="object", disable=not progress, dynamic_ncols=True)
+            for spec, views in zip(rendered_specs, rendered):
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions),
                                   origin=ObjectOrigin(spec.source, spec.licence))
             plans = []
             for episode_id, split, scene_id, objs in plan_episodes(specs, seed, size.episodes):
+                if split not in size.splits:
+                    continue
                 writer.add_episode(episode_id, split, scene_id, objs[0].object_id, [o.object_id for o in objs[1:]])
                 roles = writer.roles(episode_id)
                 clutter = choose_scanned([s for s in specs if s.split == split], objs,

@@ -16,6 +16,10 @@ class SynthSize:
     episodes: int = 30
     objects_per_family: int = 5
     frames_per_episode: int = 48
+    splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
 
 
 DEFAULT_SIZE = SynthSize()  # the embedded default set
+# named sizes: ``pin-match synth --preset NAME``. "bench": 100 val episodes, so SR, SPL and CE rank matchers with
+# intervals of about +-10 points (15 episodes move SR in steps of 6.7 points, its interval spanning about +-25)
+PRESETS = {"default": DEFAULT_SIZE, "bench": SynthSize(episodes=200)}

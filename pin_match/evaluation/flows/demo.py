@@ -7,7 +7,7 @@ treatment: sigma chosen without its val split, each matcher compared with the se
 photos first. Sigma is the one tuned on the set's own train split (first-match objective) when
 pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
 definition, its builder's provenance and frames per split, and each matcher's id), so a newcomer's
-run scores the val split only. The definition decides, not the frames' bytes: a renderer or JPEG
+run renders and scores the val split only (the scanned set's train split is built only to tune). The definition decides, not the frames' bytes: a renderer or JPEG
 writer on another machine gives other bytes for the same set. A set or a matcher that no longer
 matches what was shipped, another seed, or ``tune=True`` tunes on the train split again (and
 writes the table to ship into the set's folder), and says why in one line. The scanned set's
@@ -46,15 +46,18 @@ class DemoError(PinMatchError, ValueError):
 SCANNED_SIZE = SynthSize(episodes=8, objects_per_family=3)
 
 
-def scanned(out: Path, seed: int, run: RunOptions) -> FrameSet:
-    """A small set of the default generator (``SCANNED_SIZE``): scanned look-alike families along PIN walks."""
+def scanned(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> FrameSet:
+    """A small set of the default generator (``SCANNED_SIZE``): scanned look-alike families along PIN walks; with
+    ``val_only`` its val split alone (the whole set's bytes), all a run at shipped sigmas reads."""
     from pin_match.data.synth import generate  # pybullet loads only when the set is rendered
 
-    return generate(out, replace(SCANNED_SIZE, seed=seed), workers=run.workers, progress=run.progress)
+    size = replace(SCANNED_SIZE, seed=seed, splits=("val",) if val_only else SCANNED_SIZE.splits)
+    return generate(out, size, workers=run.workers, progress=run.progress)
 
 
-def lookalikes(out: Path, seed: int, run: RunOptions) -> FrameSet:
-    """The CORe50 look-alikes pasted along approach walks through real rooms (the photos shipped with pin_match)."""
+def lookalikes(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> FrameSet:
+    """The CORe50 look-alikes pasted along approach walks through real rooms (the photos shipped with pin_match;
+    pasting is cheap, so both splits are built even for a run that reads val only)."""
     from pin_match.data.sources import get
 
     return get("core50").build(out, "approach", seed)
@@ -68,7 +71,7 @@ class DemoSet:
     name: str
     folder: str  # under the demo folder; "" for the demo folder itself
     caption: str
-    build: Callable[[Path, int, RunOptions], FrameSet]  # (out, seed, run options) -> the frame-set written there
+    build: Callable[[Path, int, RunOptions, bool], FrameSet]  # (out, seed, run options, val only) -> the set there
     matchers: tuple[str, ...]
     sigmas: str  # the file in ``SHIPPED_SIGMAS`` of the sigmas tuned on the set's train split at seed 0
 
@@ -104,8 +107,13 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
     for s in sets:
         here = layout.nested(s.folder) if s.folder else layout
         timer = watch.within(s.name)
-        fs = _load_or_make(here.frameset, seed, timer, lambda path, s=s: s.build(path, seed, run))
+        def make(path: Path, val_only: bool, s: DemoSet = s) -> FrameSet:
+            return s.build(path, seed, run, val_only)
+
+        fs = _load_or_make(here.frameset, seed, timer, make, val_only=not tune and s.shipped.exists())
         shipped, why = (None, "tuned on its train split as asked (--tune)") if tune else shipped_sigmas(s, fs)
+        if shipped is None and "train" not in set(fs.episodes.split):  # its val split alone was built: train too
+            fs = _load_or_make(here.frameset, seed, timer, make, val_only=False)
         done = bench(EvalContext(fs), s.matchers, here, sigma=SigmaRule(shipped or "train"), run=run,
                      watch=timer)
         if shipped is None:
@@ -120,9 +128,23 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
 
 def set_definition(fs: FrameSet) -> dict:
     """What defines a built set, whatever bytes a machine's renderer, camera model or JPEG writer gave it: its
-    builder's provenance (generator and version, seed, sizes, source) and its frames per split."""
+    builder's provenance (generator and version, seed, sizes, source) and its frames per split. A set rendered in
+    part (the demo's val split alone) has the whole set's definition less the splits it lacks, and says which it
+    holds (``splits``)."""
     return dict(provenance=fs.manifest.get("provenance", {}),
                 frames={str(k): int(v) for k, v in fs.frames.split.value_counts().sort_index().items()})
+
+
+def _differs(definition: dict, theirs: dict) -> list[str]:
+    """The parts of ``definition`` that ``theirs`` (a whole set's) does not share: the splits a set lacks, and its
+    ``splits`` note, are no difference."""
+    mine = {"provenance": {k: v for k, v in definition.get("provenance", {}).items() if k != "splits"},
+            "frames": definition.get("frames", {})}
+    held = set(mine["frames"])
+    whole = {"provenance": theirs.get("provenance", {}),
+             "frames": {k: v for k, v in theirs.get("frames", {}).items() if k in held}}
+    return sorted(k for part in ("provenance", "frames") for k in set(mine[part]) | set(whole[part])
+                  if mine[part].get(k) != whole[part].get(k))
 
 
 def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
@@ -133,11 +155,8 @@ def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
     shipped = atomic.read_json(s.shipped, DemoError, "shipped demo sigmas")
     ids = {create_matcher(name).id for name in s.matchers}
     redo = "tuned on its train split instead (`pin-match demo --tune` writes the table to ship)"
-    definition, theirs = set_definition(fs), shipped.get("definition", {})
-    if definition != theirs:
-        differs = sorted(k for part in ("provenance", "frames") for k in
-                         set(definition.get(part, {})) | set(theirs.get(part, {}))
-                         if definition.get(part, {}).get(k) != theirs.get(part, {}).get(k))
+    differs = _differs(set_definition(fs), shipped.get("definition", {}))
+    if differs:
         return None, f"the shipped ones were tuned on another definition of the set ({', '.join(differs)}): {redo}"
     missing = sorted(ids - set(shipped.get("thresholds", {})))
     if missing:
@@ -157,13 +176,16 @@ def write_sigmas_to_ship(done: Bench, fs: FrameSet, path: Path) -> None:
                     for r in done.run.tuned.values()}))
 
 
-def _load_or_make(path: Path, seed: int, watch: Stopwatch, make: Callable[[Path], FrameSet]) -> FrameSet:
-    """The frame-set at ``path`` when it was built with ``seed``; else built there (again)."""
+def _load_or_make(path: Path, seed: int, watch: Stopwatch, make: Callable[[Path, bool], FrameSet], *,
+                  val_only: bool) -> FrameSet:
+    """The frame-set at ``path`` when it was built with ``seed`` and holds a train split unless ``val_only``; else
+    built there (again; its val split alone with ``val_only``)."""
     if (path / MANIFEST).exists():
         with watch.step("load frame-set"):
             fs = FrameSet.load(path)
-        if fs.manifest.get("provenance", {}).get("seed", seed) == seed:
+        if fs.manifest.get("provenance", {}).get("seed", seed) == seed and (val_only or "train" in
+                                                                            set(fs.episodes.split)):
             return fs
         shutil.rmtree(path)
-    with watch.step("build frame-set"):
-        return make(path)
+    with watch.step("build frame-set", "val split" if val_only else "train and val splits"):
+        return make(path, val_only)
