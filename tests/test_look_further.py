@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pandas as pd
 import pytest
-from test_navigation import table_of, walk_set  # noqa: F401 (walk_set: a fixture used below)
+from test_navigation import BACK, TARGET, table_of, walk_set  # noqa: F401 (walk_set: a fixture used below)
 from test_policies import random_scored, scored_episodes
 
 from pin_match.evaluation import EvalContext
@@ -122,19 +122,20 @@ def test_the_walk_back_and_the_frames_looked_on_are_counted(walk_set):  # noqa: 
     ctx = EvalContext(walk_set)
     places = ctx.placements(table_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.95, 0.0]), "val")
     pin = episodes_at(places, 0.5).iloc[0]
-    assert (pin.outcome, pin.stop_step, pin.steps) == ("category error", 1, 1 + 0 + 12 + 1)
+    assert (pin.outcome, pin.stop_step, pin.steps) == ("category error", 1, 1 + 0 + math.ceil((3 - BACK) / 0.25) + 1)
     look = episodes_at(places, 0.5, LookFurther(window=4)).iloc[0]  # steps 1-5: commits at step 5 to step 4
     assert (look.outcome, look.fired_step, look.stop_step, look.point_frame_id, look.candidates) == \
         ("success", 1, 5, "e_0004", 2)
-    assert look.steps == 5 + 0 + 8 + 1  # walked to step 5, then 2 m straight ahead to the target, stop
-    assert look.path == pytest.approx(4.0 + 2.0) and look.spl == pytest.approx(1.0)
+    assert look.steps == 5 + 0 + 7 + 1  # walked to step 5, then 2 m ahead to stand BACK short of the target, stop
+    assert look.path == pytest.approx(4.0 + 2.0 - BACK) and look.spl == pytest.approx(1.0)
     # the best candidate behind the agent: the look-alike (0.9) over a weaker target view; it walks back to it
     places = ctx.placements(table_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.6, 0.0]), "val")
     back = episodes_at(places, 0.5, LookFurther(window=None)).iloc[0]
     assert (back.outcome, back.stop_step, back.point_frame_id) == ("category error", 5, "e_0001")
     turn = math.degrees(math.atan2(3.0, -4.0))  # from (1, 0) facing 0 degrees to the look-alike at (-3, 3)
-    assert back.steps == 5 + math.ceil((turn - 15) / 30) + math.ceil(5.0 / 0.25) + 1
-    assert back.path == pytest.approx(4.0 + 5.0) and back.d2g == pytest.approx(math.hypot(6.0, 3.0))
+    assert back.steps == 5 + math.ceil((turn - 15) / 30) + math.ceil((5.0 - BACK) / 0.25) + 1
+    stand = (-3.0 + 0.8 * BACK, 3.0 - 0.6 * BACK, 0.0)  # BACK short of the look-alike, toward (1, 0)
+    assert back.path == pytest.approx(4.0 + 5.0 - BACK) and back.d2g == pytest.approx(math.dist(stand, TARGET))
 
 
 def test_an_unplaced_candidate_is_passed_over_in_the_window_too(walk_set):  # noqa: F811
@@ -180,7 +181,7 @@ def test_report_and_bench_read_the_policy(walk_set, tmp_path):  # noqa: F811
 
     table = table_of(walk_set, [0.0, 0.9, 0.0, 0.0, 0.95, 0.0])
     done = report(table, walk_set, tmp_path / "r", sigma=0.5, policy=LookFurther(window=4))
-    assert done["policy"] == "look:4" and done["metrics"]["sr"] == 100.0 and done["metrics"]["steps"] == 14
+    assert done["policy"] == "look:4" and done["metrics"]["sr"] == 100.0 and done["metrics"]["steps"] == 13
     assert done["metrics"]["commit_target_pct"] == 100.0 and done["metrics"]["frames_looked_at"] == 6
     commits = pd.read_csv(tmp_path / "r" / "commits.csv")
     assert commits.loc[0, "committed_step"] == 4 and commits.loc[0, "policy"] == "look:4"
@@ -208,7 +209,7 @@ def test_the_trade_reads_each_window_at_its_own_sigma(walk_set, tmp_path):  # no
     assert rows.policy.tolist() == ["look:0", "look:4", "look:rest"] and rows.upper_bound.tolist() == [0, 0, 1]
     assert rows.window.iloc[:2].tolist() == [0, 4] and math.isnan(rows.window.iloc[2])
     assert rows.sigma.tolist() == [0.95] * 3  # ties go to the highest sigma: only 0.95 passes the look-alike by
-    # first match stops at step 4 (4 walked, 3 m ahead: 12 forward, stop); a window commits at step 5 (2 m left)
-    assert rows.steps.tolist() == [4 + 12 + 1, 5 + 8 + 1, 5 + 8 + 1] and rows.sr.tolist() == [100.0] * 3
+    # first match stops at step 4 (4 walked, 3 m ahead less BACK: 11 forward, stop); a window commits at step 5
+    assert rows.steps.tolist() == [4 + 11 + 1, 5 + 7 + 1, 5 + 7 + 1] and rows.sr.tolist() == [100.0] * 3
     csv, png = write_trade(rows, tmp_path)
     assert pd.read_csv(csv).shape == rows.shape and png.stat().st_size > 0
