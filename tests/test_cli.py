@@ -282,7 +282,7 @@ def test_demo_builds_again_a_frameset_made_with_another_seed(tiny_frameset, tmp_
 
     made = []
 
-    def make(path: Path) -> FrameSet:
+    def make(path: Path, val_only: bool) -> FrameSet:
         made.append(path)
         assert not path.exists()  # the stale set is gone before it is made again
         shutil.copytree(tiny_frameset.root, path)
@@ -298,7 +298,7 @@ def test_demo_builds_again_a_frameset_made_with_another_seed(tiny_frameset, tmp_
 
     watch = Stopwatch()
     stale = with_seed(5)
-    fs = _load_or_make(stale, 0, watch, make)
+    fs = _load_or_make(stale, 0, watch, make, val_only=True)
     assert made == [stale] and fs.root == stale and fs.manifest["provenance"] == {}  # made again: the copy
     assert list(watch.seconds) == ["load frame-set", "build frame-set"]
 
@@ -306,12 +306,12 @@ def test_demo_builds_again_a_frameset_made_with_another_seed(tiny_frameset, tmp_
         made.clear()
         watch = Stopwatch()
         kept = with_seed(seed)
-        fs = _load_or_make(kept, 0, watch, make)
+        fs = _load_or_make(kept, 0, watch, make, val_only=True)
         assert made == [] and fs.manifest["provenance"] == ({} if seed is None else {"seed": 0})
         assert list(watch.seconds) == ["load frame-set"]
 
     made.clear()
-    assert _load_or_make(tmp_path / "absent" / "frameset", 0, Stopwatch(), make).root.is_dir()
+    assert _load_or_make(tmp_path / "absent" / "frameset", 0, Stopwatch(), make, val_only=True).root.is_dir()
     assert made == [tmp_path / "absent" / "frameset"]
 
 

@@ -7,8 +7,8 @@ treatment: sigma chosen without its val split, each matcher compared with the se
 photos first. Sigma is the one tuned on the set's own train split (first-match objective) when
 pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
 definition, its builder's provenance and frames per split, and each matcher's id), so a newcomer's
-run renders and scores the val split only (the scanned set's train split is built only to tune). The definition decides, not the frames' bytes: a renderer or JPEG
-writer on another machine gives other bytes for the same set. A set or a matcher that no longer
+run renders and scores the val split only (the scanned set's train split is built only to tune).
+The definition decides, not the frames' bytes: a renderer or JPEG writer on another machine gives other bytes for the same set. A set or a matcher that no longer
 matches what was shipped, another seed, or ``tune=True`` tunes on the train split again (and
 writes the table to ship into the set's folder), and says why in one line. The scanned set's
 folder is the demo folder itself (the notebooks read it), the real photos' is nested in it; a
@@ -187,5 +187,5 @@ def _load_or_make(path: Path, seed: int, watch: Stopwatch, make: Callable[[Path,
                                                                             set(fs.episodes.split)):
             return fs
         shutil.rmtree(path)
-    with watch.step("build frame-set", "val split" if val_only else "train and val splits"):
+    with watch.step("build frame-set"):
         return make(path, val_only)
