@@ -8,13 +8,13 @@ photos first. Sigma is the one tuned on the set's own train split (first-match o
 pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
 definition, its builder's provenance and frames per split, and each matcher's id), so a newcomer's
 run renders and scores the val split only (the scanned set's train split is built only to tune).
-The definition decides, not the frames' bytes: a renderer or JPEG writer on another machine gives other bytes for the same set. A set or a matcher that no longer
-matches what was shipped, another seed, or ``tune=True`` tunes on the train split again (and
-writes the table to ship into the set's folder), and says why in one line. The scanned set's
-folder is the demo folder itself (the notebooks read it), the real photos' is nested in it; a
-set found there built with another seed is built again. A ``Stopwatch`` collects where the
-time went, with the number of frames each matcher scored, so a slow step can be found without
-a profiler.
+The definition decides, not the frames' bytes: a renderer or JPEG writer on another machine gives
+other bytes for the same set. A set or a matcher that no longer matches what was shipped, another
+seed, or ``tune=True`` tunes on the train split again (and writes the table to ship into the set's
+folder), and says why in one line. The scanned set's folder is the demo folder itself (the notebooks
+read it), the real photos' is nested in it; a set found there built with another seed is built
+again. A ``Stopwatch`` collects where the time went, with the number of frames each matcher scored,
+so a slow step can be found without a profiler.
 """
 
 from __future__ import annotations
