@@ -95,7 +95,7 @@ def test_demo_index_page_loads_in_a_browser(browser, tiny_frameset, tmp_path):
     from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED, demo
     from pin_match.scoring import RunOptions
 
-    def copy(out: Path, seed: int, run: RunOptions):
+    def copy(out: Path, seed: int, run: RunOptions, val_only: bool):
         shutil.copytree(tiny_frameset.root, out)
         return type(tiny_frameset).load(out)
 
