@@ -69,8 +69,9 @@ def navigation_line(results: Sequence[dict]) -> str | None:
         return f"{r['metrics'][key]:.1f} %" + (f" ({ci[0]:.1f}-{ci[1]:.1f})" if ci else "")
 
     parts = [f"{r['matcher']} SR {said(r, 'sr')}, CE {said(r, 'ce')}" for r in results]
-    return ("What the agent would do (estimated from the recorded walks: the stop is the first match placed with "
-            "depth, the agent walks to it; success within 1 m of the target, CE within 1 m of a look-alike): "
+    return ("What the agent would do (estimated from the recorded walks: where the stop policy commits to a match "
+            "placed with depth, the agent walks toward it and stands on the floor nearest it; success: standing "
+            "within 1 m of the target, CE within 1 m of a look-alike): "
             + "; ".join(parts) + ".")
 
 
@@ -96,7 +97,7 @@ def stop_line(walk) -> str:
     """Where the agent stopped (the navigation estimate), in a few words."""
     if walk.outcome == "not found":
         return f"the agent never stops: {walk.d2g:.1f} m from the target at the walk's end"
-    return f"the agent stops at step {walk.stop_step}: {walk.outcome}, {walk.d2g:.2f} m from the target"
+    return f"the agent stops at step {walk.stop_step:.0f}: {walk.outcome}, {walk.d2g:.2f} m from the target"
 
 
 def stops(run: BenchRun, matcher: str) -> dict[str, object]:
