@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,12 @@ def tree_hash(root: Path) -> str:
 @pytest.fixture(scope="module")
 def synth(tmp_path_factory):
     return generate(tmp_path_factory.mktemp("synth") / "fs", SMALL, workers=2)
+
+
+@pytest.fixture(scope="module")
+def approach(tmp_path_factory):
+    """The walk that heads for its target (``--walk approach``), in the same houses."""
+    return generate(tmp_path_factory.mktemp("synth") / "approach", replace(SMALL, walk="approach"), workers=2)
 
 
 @pytest.fixture(scope="module")
@@ -99,71 +106,83 @@ def _spec(name: str, family: str, split: str) -> ObjectSpec:
                       describe(family, name))
 
 
+def _episodes(houses):
+    """(episode id, split, target, the house's other objects) per planned episode."""
+    return [(episode_id, split, objs[t], [o for k, o in enumerate(objs) if k != t])
+            for _, split, objs, episodes in houses for episode_id, t in episodes]
+
+
 def test_targets_come_from_families_with_a_lookalike_in_their_split():
-    from pin_match.data.synth.generate import plan_episodes
+    from pin_match.data.synth.generate import TARGETS_PER_HOUSE, plan_houses
 
     specs = ([_spec(f"a{k}", "apple", "train") for k in range(2)] + [_spec("a9", "apple", "val")]
              + [_spec("b0", "box", "train")] + [_spec(f"b{k}", "box", "val") for k in range(1, 4)]
              + [_spec(f"c{k}", "cup", s) for k, s in enumerate(["train"] * 5 + ["val"] * 5)])
-    plans = plan_episodes(specs, seed=0, episodes=20)
-    assert len(plans) == 20
+    houses = plan_houses(specs, seed=0, episodes=20)
+    episodes = _episodes(houses)
+    assert len(episodes) == 20 and len(houses) == 2 * -(-10 // TARGETS_PER_HOUSE)  # 10 a split, 3 a house
     by_name = {s.object_id: s for s in specs}
-    targets = {split: {objs[0].category for _, sp, _, objs in plans if sp == split} for split in ("train", "val")}
+    targets = {split: {target.category for _, sp, target, _ in episodes if sp == split} for split in ("train", "val")}
     assert targets == {"train": {"apple", "cup"}, "val": {"box", "cup"}}  # apple has one val instance, box one train
-    for episode_id, split, _, objs in plans:
-        assert episode_id.startswith(split) and all(by_name[o.object_id].split == split for o in objs)
-        same = [o for o in objs[1:] if o.category == objs[0].category]
-        assert 1 <= len(same) <= 3 and objs[0] not in objs[1:], episode_id
+    for episode_id, split, target, others in episodes:
+        assert episode_id.startswith(split) and all(by_name[o.object_id].split == split for o in [target, *others])
+        same = [o for o in others if o.category == target.category]
+        assert 1 <= len(same) <= 3 and target not in others, episode_id
+    for house_id, _, objs, planned in houses:
+        assert len({o.object_id for o in objs}) == len(objs), house_id  # an object stands once in its house
+        assert len({t for _, t in planned}) == len(planned), house_id  # and is the target of one episode there
     with pytest.raises(SynthError, match="no family has two val instances"):
-        plan_episodes([s for s in specs if s.category == "apple"], seed=0, episodes=4)
+        plan_houses([s for s in specs if s.category == "apple"], seed=0, episodes=4)
 
 
 def test_shipped_plans_keep_splits_and_give_every_target_a_sibling(shipped):
-    from pin_match.data.synth.generate import plan_episodes
+    from pin_match.data.synth.generate import plan_houses
 
     specs = make_objects(shipped, 5)
     split_of = {s.object_id: s.split for s in specs}
-    plans = plan_episodes(specs, seed=0, episodes=60)
-    for episode_id, split, _, objs in plans:
-        assert {split_of[o.object_id] for o in objs} == {split}, episode_id
-        assert len({o.object_id for o in objs}) == len(objs), episode_id
-        assert any(o.category == objs[0].category for o in objs[1:]), episode_id
+    houses = plan_houses(specs, seed=0, episodes=60)
+    for house_id, split, objs, _ in houses:
+        assert {split_of[o.object_id] for o in objs} == {split}, house_id
+    episodes = _episodes(houses)
+    for episode_id, _, target, others in episodes:
+        assert any(o.category == target.category for o in others), episode_id
     # each split's targets cycle through every family that has two instances in it
     for split in ("train", "val"):
         families = {f for f in {s.category for s in specs} if sum(s.category == f and s.split == split
                                                                   for s in specs) >= 2}
-        assert {objs[0].category for _, sp, _, objs in plans if sp == split} == families, split
+        assert {target.category for _, sp, target, _ in episodes if sp == split} == families, split
 
 
 def test_distractor_counts_follow_pins_val_episodes(shipped):
-    """3 siblings in 9 episodes of 10 where the family has them (PIN: 2.90 on average, at most 3), else all of them;
-    4 to 10 others, 7.19 on average (PIN's)."""
-    from pin_match.data.synth.generate import plan_episodes
+    """3 look-alikes in 9 episodes of 10 where the family has them (PIN: 2.90 on average, at most 3), else all of
+    them; the other families of the house give 4 to 8 others, about 7 on average (PIN's: 4 to 10, 7.19)."""
+    from pin_match.data.synth.generate import plan_houses
 
     specs = make_objects(shipped, 5)
     same, other, room = [], [], []
-    for _, split, _, objs in plan_episodes(specs, seed=1, episodes=2000):
-        members = sum(s.category == objs[0].category and s.split == split for s in specs)
-        same.append(sum(o.category == objs[0].category for o in objs[1:]))
-        other.append(len(objs) - 1 - same[-1])
+    for _, split, target, others in _episodes(plan_houses(specs, seed=1, episodes=2000)):
+        members = sum(s.category == target.category and s.split == split for s in specs)
+        same.append(sum(o.category == target.category for o in others))
+        other.append(len(others) - same[-1])
         room.append(members - 1)
     same, other, room = np.array(same), np.array(other), np.array(room)
     assert (same[room < 3] == room[room < 3]).all()  # a family of 2 or 3 brings every sibling
     assert set(same[room >= 3]) == {2, 3} and same[room >= 3].mean() == pytest.approx(2.90, abs=0.04)
-    assert other.min() == 4 and other.max() == 10 and other.mean() == pytest.approx(7.19, abs=0.1)
+    assert other.min() >= 4 and other.max() <= 10 and 6.0 <= other.mean() <= 8.0, (other.min(), other.max(),
+                                                                                   other.mean())
 
 
-def test_scanned_clutter_is_never_of_the_target_family_nor_already_in_the_episode(shipped):
+def test_scanned_clutter_is_never_of_a_family_of_the_house(shipped):
     from pin_match.data.synth.clutter import SCANNED, choose_scanned
-    from pin_match.data.synth.generate import plan_episodes
+    from pin_match.data.synth.generate import plan_houses
 
     specs = make_objects(shipped, 5)
-    for episode_id, split, _, objs in plan_episodes(specs, seed=0, episodes=30):
+    for house_id, split, objs, _ in plan_houses(specs, seed=0, episodes=30):
         pool = [s for s in specs if s.split == split]
-        clutter = choose_scanned(pool, objs, np.random.default_rng(len(episode_id)))
+        clutter = choose_scanned(pool, objs, np.random.default_rng(len(house_id)))
         assert SCANNED[0] <= len(clutter) <= SCANNED[1]
-        assert all(c.category != objs[0].category and c.split == split for c in clutter), episode_id
-        assert not {c.object_id for c in clutter} & {o.object_id for o in objs}, episode_id
+        families = {o.category for o in objs}  # any annotated object may be a target: no unannotated look-alike
+        assert all(c.category not in families and c.split == split for c in clutter), house_id
 
 
 def test_a_colour_double_wears_only_the_colours_of_the_surface():
@@ -214,10 +233,75 @@ def test_episodes_stay_in_their_split_with_a_same_family_distractor(synth):
     for _, ep in synth.episodes.iterrows():
         assert {split_of[o] for o in [ep.target_object_id, *ep.distractor_object_ids]} == {ep.split}
         same = [o for o in ep.distractor_object_ids if category[o] == ep.target_category]
-        other = [o for o in ep.distractor_object_ids if category[o] != ep.target_category]
         assert category[ep.target_object_id] == ep.target_category
         assert 1 <= len(same) <= 3, ep.episode_id
-        assert 4 <= len(other) <= 10, ep.episode_id
+    for house, eps in synth.episodes.groupby("scene_id"):  # every episode of a house holds all its objects
+        held = {frozenset([ep.target_object_id, *ep.distractor_object_ids]) for _, ep in eps.iterrows()}
+        assert len(held) == 1 and len(eps) == eps.target_object_id.nunique(), house
+
+
+def test_a_house_s_episodes_read_one_walk_rendered_once(synth):
+    """The exploration does not know the target: every episode of a house has the same frames (bytes, poses, masks),
+    and only the roles in them change."""
+    frames = synth.frames.merge(synth.episodes[["episode_id", "scene_id", "target_object_id"]], on="episode_id")
+    houses = frames.groupby("scene_id")
+    assert houses.episode_id.nunique().max() >= 2  # a house of several episodes to compare
+    for house, rows in houses:
+        walks = {episode_id: r.sort_values("step") for episode_id, r in rows.groupby("episode_id")}
+        first, *others = walks.values()
+        for walk in others:
+            assert walk.sha256.tolist() == first.sha256.tolist(), house
+            assert np.array_equal(walk[["pose_x", "pose_y", "pose_yaw", "pose_pitch"]].to_numpy(),
+                                  first[["pose_x", "pose_y", "pose_yaw", "pose_pitch"]].to_numpy()), house
+            for a, b in zip(first.frame_id, walk.frame_id):
+                assert np.array_equal(synth.instance_mask(a), synth.instance_mask(b)), (a, b)
+    targets = synth.visibility[synth.visibility.role == "target"].merge(frames[["frame_id", "target_object_id"]])
+    assert (targets.object_id == targets.target_object_id).all()  # the role follows the episode's target
+
+
+def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
+    """One house rendered for two different targets: byte-identical frames, the roles aside."""
+    from pin_match.data.compose import stable_seed
+    from pin_match.data.synth.generate import HousePlan, plan_houses, render_house
+
+    specs = make_objects(shipped, 2)
+    house_id, split, objs, _ = plan_houses(specs, seed=3, episodes=4)[0]
+    shas, measured = [], []
+    for t in (0, len(objs) - 1):
+        staging = tmp_path / f"target{t}"
+        plan = HousePlan(house_id, split, stable_seed(3, "scene", house_id), stable_seed(3, "house", house_id),
+                         tuple(objs), (("train_000", t),), 6, "explore", str(staging))
+        (_, records, geometry), = render_house(plan)
+        shas.append([r.frame["sha256"] for r in records])
+        measured.append(set(geometry.geodesic_to))  # the target and its look-alikes
+        assert geometry.positions.keys() == {o.object_id for o in objs}
+    assert len(shas[0]) == 6 and shas[0] == shas[1]
+    assert measured[0] != measured[1]
+
+
+def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
+    """Three rooms in a row, each doorway passable; every step of an exploration walk stays on free floor, and the
+    whole tour visits every room."""
+    from pin_match.data.synth.generate import ROOMS
+    from pin_match.data.synth.scene import make_house
+    from pin_match.data.synth.walk import Grid, exploration_walk, floor_map
+
+    for seed in range(3):
+        house = make_house(np.random.default_rng(seed), ROOMS)
+        assert len(house.rooms) == ROOMS >= 2
+        grid = Grid(house, list(house.footprints))
+        floor = floor_map(house, list(house.footprints))
+        reached = grid.bfs(tuple(int(v) for v in np.argwhere(grid.free)[0]))
+        assert len(reached) == grid.free.sum(), seed  # one floor: every room reached through the doorways
+        assert {house.room_of(*grid.centre(c)) for c in reached} == set(range(ROOMS)), seed
+        walk = exploration_walk(house, list(house.footprints), [], 1000, np.random.default_rng(seed))
+        assert 60 < len(walk) < 1000  # the tour ends once every piece of furniture was looked at
+        for (ax, ay, _, _), (bx, by, _, _) in zip(walk, walk[1:]):
+            assert np.hypot(bx - ax, by - ay) <= 0.25 + 1e-9  # PIN's forward step at most
+            for f in np.linspace(0.0, 1.0, 6):  # never through a wall: every point of the step is standable floor
+                x, y = ax + f * (bx - ax), ay + f * (by - ay)
+                assert floor.free[int(x / floor.cell), int(y / floor.cell)], (seed, x, y)
+        assert len({house.room_of(x, y) for x, y, _, _ in walk}) == ROOMS, seed  # and that takes it to every room
 
 
 def test_objects_csv_names_each_scan_and_its_licence(synth, shipped):
@@ -248,11 +332,12 @@ def test_rendered_descriptions_are_the_scans(synth):
         assert tuple(synth.descriptions[obj.object_id]) == describe(obj.category, obj.object_id)
 
 
-def test_visibility_agrees_with_masks(synth):
-    vis = synth.visibility
-    for frame_id in synth.frames.frame_id:
-        mask = synth.instance_mask(frame_id)
-        depth = synth.depth(frame_id)
+def test_visibility_agrees_with_masks(approach):
+    vis = approach.visibility
+    assert len(vis)
+    for frame_id in approach.frames.frame_id:
+        mask = approach.instance_mask(frame_id)
+        depth = approach.depth(frame_id)
         rows = vis[vis.frame_id == frame_id]
         values, counts = np.unique(mask[mask > 0], return_counts=True)
         assert sorted(rows.mask_value) == values.tolist()
@@ -264,13 +349,15 @@ def test_visibility_agrees_with_masks(synth):
             assert np.isclose(row.depth, depth[ys, xs].mean(), atol=1e-3)
 
 
-def test_frames_shape_and_roles(synth):
+def test_frames_shape_and_roles(synth, approach):
     assert set(zip(synth.frames.height, synth.frames.width)) == {(640, 360)}
     per_episode = synth.frames.groupby("episode_id").size()
     assert len(per_episode) == SMALL.episodes
+    assert (per_episode == SMALL.frames_per_episode).all()  # the exploration's step budget
+    per_episode = approach.frames.groupby("episode_id").size()
     assert (per_episode >= SMALL.frames_per_episode).all()  # the approach runs to its end: longer, never shorter
-    roles = set(synth.visibility.role)
-    assert "target" in roles and "other" in roles
+    roles = set(approach.visibility.role)  # an approach shows its target and passes a look-alike
+    assert {"target", "same_category"} <= roles
 
 
 def _pixels(fs, role: str) -> pd.DataFrame:
@@ -280,9 +367,9 @@ def _pixels(fs, role: str) -> pd.DataFrame:
     return frames.join(vis, how="left").fillna({"pixels": 0})
 
 
-def test_every_episode_ends_beside_its_target_facing_it(synth):
-    vis = synth.visibility
-    for episode_id, frames in synth.frames.groupby("episode_id"):
+def test_every_approach_ends_beside_its_target_facing_it(approach):
+    vis = approach.visibility
+    for episode_id, frames in approach.frames.groupby("episode_id"):
         last = frames.sort_values("step").frame_id.iloc[-1]
         row = vis[(vis.frame_id == last) & (vis.role == "target")]
         assert len(row) == 1, f"{episode_id}: the last frame does not show the target"
@@ -292,9 +379,9 @@ def test_every_episode_ends_beside_its_target_facing_it(synth):
         assert 0.25 * 360 < centre < 0.75 * 360, f"{episode_id}: the target is off to the side ({centre} px)"
 
 
-def test_every_episode_stops_with_its_target_large_and_passes_a_lookalike(synth):
+def test_every_approach_stops_with_its_target_large_and_passes_a_lookalike(approach):
     """The stop (the arrival and the two tilt frames) shows the target large; a look-alike was seen near on the way."""
-    target, same = _pixels(synth, "target"), _pixels(synth, "same_category")
+    target, same = _pixels(approach, "target"), _pixels(approach, "same_category")
     for episode_id, frames in target.groupby("episode_id"):
         stop = frames.sort_values("step").pixels.iloc[-3:]
         assert (stop >= 1000).all(), (episode_id, stop.tolist())

@@ -126,6 +126,51 @@ class FloorMap:
         best = np.flatnonzero(to_goal <= to_goal.min() + 1e-9)
         return centres[reach][best[int(np.argmin(from_eye[reach][best]))]]
 
+    def walk_length(self, a_xy: Sequence[float], b_xy: Sequence[float]) -> float:
+        """The shortest walk on the map from ``a_xy`` to ``b_xy`` (x, y): from the standable cell nearest each point,
+        8-connected cells (a diagonal step sqrt(2) cells), plus the straight bits from the points to their cells;
+        the straight line where no walk joins them (two parts of the floor). What PIN's agent walks after a commit,
+        around walls and furniture, never through them."""
+        centres = self.centres
+        a, b = (int(np.argmin(np.hypot(*(centres - np.asarray(p, np.float64)[:2]).T))) for p in (a_xy, b_xy))
+        walked = self._lengths_from(a)[b]
+        ends = float(np.hypot(*(centres[a] - np.asarray(a_xy)[:2])) + np.hypot(*(centres[b] - np.asarray(b_xy)[:2])))
+        return float(walked + ends) if np.isfinite(walked) else float(np.hypot(*(np.asarray(b_xy)[:2] -
+                                                                                   np.asarray(a_xy)[:2])))
+
+    def _lengths_from(self, source: int) -> np.ndarray:
+        """Walk lengths from the standable cell ``source`` (an index into ``centres``) to every one, cached per
+        source: a sweep of sigmas asks the same few sources again and again."""
+        from scipy.sparse.csgraph import dijkstra
+
+        cache = self.__dict__.setdefault("_lengths", {})
+        if source not in cache:
+            cache[source] = dijkstra(self._graph(), indices=source)
+        return cache[source]
+
+    def _graph(self):
+        """The standable cells as a graph: an edge between 8-neighbours, weighted by the distance of their centres."""
+        if "_graph" not in self.__dict__:
+            from scipy.sparse import coo_matrix
+
+            index = np.full(self.free.shape, -1, np.int64)
+            cells = np.argwhere(self.free)
+            index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
+            rows, cols, weights = [], [], []
+            for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1)):
+                ni, nj = cells[:, 0] + di, cells[:, 1] + dj
+                inside = (ni >= 0) & (ni < self.free.shape[0]) & (nj >= 0) & (nj < self.free.shape[1])
+                other = np.full(len(cells), -1, np.int64)
+                other[inside] = index[ni[inside], nj[inside]]
+                ok = other >= 0
+                rows.append(np.flatnonzero(ok))
+                cols.append(other[ok])
+                weights.append(np.full(int(ok.sum()), self.cell * (math.sqrt(2.0) if di and dj else 1.0)))
+            r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
+            self.__dict__["_graph"] = coo_matrix((np.r_[w, w], (np.r_[r, c], np.r_[c, r])),
+                                                 shape=(len(cells), len(cells))).tocsr()
+        return self.__dict__["_graph"]
+
     def nearest(self, xyz: Sequence[float], floor: float) -> float:
         """The least distance from an agent standing anywhere on the map (on the floor at height ``floor``) to the
         point ``xyz``: how close PIN's success rule could ever count it."""

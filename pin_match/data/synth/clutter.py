@@ -4,8 +4,9 @@ PIN's houses are HM3D scans full of real things, with the episode's objects inse
 only the inserted ones are annotated. Here the clutter is of two kinds, both background (mask
 value 0) in the instance mask, as a scan's own things are in PIN's:
 
-- **scanned products** of the split's other families (never of the target's family, never an
-  object the episode already holds): real products at real size on shelves, tables and floors;
+- **scanned products** of the split's other families (never of a family the house's annotated
+  objects belong to, since each of those may be a target): real products at real size on shelves,
+  tables and floors;
 - **colour doubles**: for every annotated object of the episode, a box or a can of about its size
   wearing patches of its own texture, cut where its surface is (area-weighted), in a new layout.
   So no annotated object's colours are unique in its room by construction: a matcher that finds
@@ -23,19 +24,19 @@ import numpy as np
 from pin_match.data.synth.objects import ObjectSpec
 from pin_match.data.synth.shapes import Mesh, box, cylinder
 
-SCANNED = (6, 10)  # scanned products of other families per episode, drawn uniformly in this range
+SCANNED = (6, 10)  # scanned products of other families per house, drawn uniformly in this range
 DOUBLE_SCALE = (0.75, 1.25)  # a colour double's size against its object's, per dimension
 DOUBLE_CELLS = (3, 6)  # its texture is a grid of this many patches a side
 PATCH = 20  # texture pixels a patch is cut from (of a 256 px atlas)
 TILE = 256
 
 
-def choose_scanned(pool: Sequence[ObjectSpec], episode: Sequence[ObjectSpec],
+def choose_scanned(pool: Sequence[ObjectSpec], house: Sequence[ObjectSpec],
                    rng: np.random.Generator) -> list[ObjectSpec]:
-    """Scanned clutter for an episode (target first in ``episode``): instances of ``pool`` (the episode's split) of
-    other families than the target's that the episode does not already hold, in ``pool`` order."""
-    held = {o.object_id for o in episode}
-    free = [s for s in pool if s.category != episode[0].category and s.object_id not in held]
+    """Scanned clutter for a house: instances of ``pool`` (the house's split) of families the house's annotated
+    objects (``house``) do not belong to, since any of those may be a target, in ``pool`` order."""
+    families = {o.category for o in house}
+    free = [s for s in pool if s.category not in families]
     count = min(len(free), int(rng.integers(SCANNED[0], SCANNED[1] + 1)))
     return [free[k] for k in sorted(rng.choice(len(free), count, replace=False))]
 

@@ -23,45 +23,60 @@ from pin_match.data.synth.clutter import choose_scanned, colour_double
 from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, reference_views, vertical_fov
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
-from pin_match.data.synth.scene import Room, make_room, place_objects
+from pin_match.data.synth.scene import Room, make_house, place_objects
 from pin_match.data.synth.sensor import develop_view, house_camera, reference_camera
 from pin_match.data.synth.shapes import Mesh
-from pin_match.data.synth.size import DEFAULT_SIZE, SynthSize
-from pin_match.data.synth.walk import CAMERA_HEIGHT, Goal, Pose, camera_walk, floor_map, geodesic_lengths
+from pin_match.data.synth.size import DEFAULT_SIZE, WALKS, SynthSize
+from pin_match.data.synth.walk import (
+    CAMERA_HEIGHT,
+    Goal,
+    Pose,
+    camera_walk,
+    exploration_walk,
+    floor_map,
+    geodesic_lengths,
+)
 from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 6  # 6: the target and look-alikes within an agent's reach, starts away from the target, floor maps
+GENERATOR_VERSION = 7  # 7: houses of rooms, one exploration walk per house that does not know the target
+ROOMS = 3  # rooms per house
+TARGETS_PER_HOUSE = 3  # episodes per house: one render of the exploration walk serves each
 REACH = 0.9  # metres: the farthest from an agent standing beside it a target or look-alike's centre may be (PIN's 1 m
 # success distance less a margin, since the agent stops beside the point it matched, not beside the centre)
 SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
-OTHER_RANGE, PIN_OTHER = (4, 10), 7.19  # other-category ones: at most 10, 7.19 on average (PIN's supplementary)
 
 
 @dataclass(frozen=True)
-class EpisodePlan:
-    """What one worker needs to render an episode: its objects (target first) with their roles."""
+class HousePlan:
+    """What one worker needs to render a house and its episodes: the house's annotated objects, each episode's id and
+    the index of its target among them, the walk's kind and step budget, and the clutter."""
 
-    episode_id: str
+    house_id: str
     split: str
-    scene_id: str
     scene_seed: int
     seed: int
     objects: tuple[ObjectSpec, ...]
-    roles: tuple[str, ...]
+    episodes: tuple[tuple[str, int], ...]
     frames: int
+    walk: str
     staging: str
-    clutter: tuple[ObjectSpec, ...] = ()  # scanned products in the room that are background (``clutter``)
+    clutter: tuple[ObjectSpec, ...] = ()  # scanned products in the house that are background (``clutter``)
 
 
-def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tuple[str, str, str, list[ObjectSpec]]]:
-    """(episode id, split, scene id, [target, distractors...]) per episode; half train, half val.
+PlannedHouse = tuple[str, str, list[ObjectSpec], list[tuple[str, int]]]  # house id, split, objects, (episode, target)
 
-    Targets cycle through a shuffled order of the split's families that have a look-alike in it
-    (two members or more), so a split's episodes cover the families evenly. Distractor counts are
-    drawn as PIN's val episodes hold them: 3 siblings with probability 0.9, else 2 (mean 2.90, at
-    most 3), all of them where the family has fewer; 4 to 10 instances of other families, 4 plus a
-    binomial draw of mean 3.19 (mean 7.19, at most 10).
+
+def plan_houses(specs: list[ObjectSpec], seed: int, episodes: int) -> list[PlannedHouse]:
+    """(house id, split, annotated objects, [(episode id, target index)...]) per house; half the episodes train,
+    half val.
+
+    A house holds ``TARGETS_PER_HOUSE`` families, each with one target (an episode) and its look-alikes:
+    3 siblings with probability 0.9, else 2 (PIN's val episodes: mean 2.90, at most 3), all of them
+    where the family has fewer. An episode's distractors are every other annotated object of its house:
+    its family's are its look-alikes, the other families' its other-category objects (PIN's: 4 to 10,
+    mean 7.19). Families cycle through a shuffled order of the split's families that have a look-alike in
+    it (two members or more), so a split's episodes cover the families evenly.
     """
     out = []
     n_val = episodes // 2
@@ -72,25 +87,25 @@ def plan_episodes(specs: list[ObjectSpec], seed: int, episodes: int) -> list[tup
             raise SynthError(f"no family has two {split} instances: an episode needs a target and a look-alike")
         rng = np.random.default_rng(stable_seed(seed, "episodes", split))
         order = [families[k] for k in rng.permutation(len(families))]
-        n_scenes = max(1, (count + 1) // 2)
-        for i in range(count):
-            category = order[i % len(order)]
-            same = [s for s in pool if s.category == category]
-            target = same[(i // len(order)) % len(same)]
-            siblings = [s for s in same if s is not target]
-            short = int(rng.random() >= PIN_SAME - (SAME_MAX - 1))  # one episode in ten holds one fewer
-            k = min(SAME_MAX - short, len(siblings))
-            others = [s for s in pool if s.category != category]
-            n_other = min(len(others), _other_count(rng))
-            chosen = [siblings[j] for j in sorted(rng.choice(len(siblings), k, replace=False))]
-            chosen += [others[j] for j in sorted(rng.choice(len(others), n_other, replace=False))]
-            out.append((f"{split}_{i:03d}", split, f"{split}_scene_{i % n_scenes:02d}", [target, *chosen]))
+        for h, first in enumerate(range(0, count, TARGETS_PER_HOUSE)):
+            objects, targets = [], []
+            for i in range(first, first + TARGETS_PER_HOUSE):  # a split's last house is full too, with fewer targets
+                category = order[i % len(order)]
+                present = [o for o in objects if o.category == category]
+                if present:  # a split of few families meets one twice in a house: another of its members is the target
+                    taken = {objects[t].object_id for _, t in targets}
+                    target = next((o for o in present if o.object_id not in taken), present[0])
+                else:
+                    same = [s for s in pool if s.category == category]
+                    target = same[(i // len(order)) % len(same)]
+                    siblings = [s for s in same if s is not target]
+                    short = int(rng.random() >= PIN_SAME - (SAME_MAX - 1))  # one episode in ten holds one fewer
+                    k = min(SAME_MAX - short, len(siblings))
+                    objects += [target] + [siblings[j] for j in sorted(rng.choice(len(siblings), k, replace=False))]
+                if i < count:
+                    targets.append((f"{split}_{i:03d}", objects.index(target)))
+            out.append((f"{split}_house_{h:02d}", split, objects, targets))
     return out
-
-
-def _other_count(rng: np.random.Generator) -> int:
-    low, high = OTHER_RANGE
-    return low + int(rng.binomial(high - low, (PIN_OTHER - low) / (high - low)))
 
 
 # ------------------------------------------------------------------ worker side
@@ -146,33 +161,31 @@ def _camera_pose(pose: Pose) -> CameraPose:
     return CameraPose(x, y, CAMERA_HEIGHT, yaw, pitch)
 
 
-def _episode_geometry(plan: EpisodePlan, room, obstacles, walk: list[Pose],
-                      centres: list[tuple[float, float, float]]) -> EpisodeGeometry:
-    """Where the walk starts, every placed object's centre, the geodesic length to the target and to each
-    same-category look-alike, and where an agent can stand."""
-    ids = [spec.object_id for spec in plan.objects]
-    measured = [k for k, role in enumerate(plan.roles) if role in ("target", "same_category")]
-    lengths = geodesic_lengths(room, obstacles, walk[0][:2], [centres[k][:2] for k in measured])
+def _episode_geometry(ids: list[str], families: list[str], target: int, house: Room, obstacles,
+                      walk: list[Pose], centres: list[tuple[float, float, float]]) -> EpisodeGeometry:
+    """Where the walk starts, every annotated object's centre, the geodesic length to the target and to each of its
+    same-family look-alikes, and where an agent can stand."""
+    measured = [target] + [k for k, f in enumerate(families) if f == families[target] and k != target]
+    lengths = geodesic_lengths(house, obstacles, walk[0][:2], [centres[k][:2] for k in measured])
     x, y, yaw, _ = walk[0]
     return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, centres)),
-                           {ids[k]: length for k, length in zip(measured, lengths)}, floor_map(room, obstacles))
+                           {ids[k]: length for k, length in zip(measured, lengths)}, floor_map(house, obstacles))
 
 
 def _within_reach(room: Room):
-    """Whether an agent standing on the room's floor, beside its furniture, gets within ``REACH`` of a point."""
+    """Whether an agent standing on the house's floor, beside its furniture, gets within ``REACH`` of a point."""
     standing = floor_map(room, room.footprints)
     return lambda x, y, z: standing.nearest((x, y, z), 0.0) <= REACH
 
 
 @dataclass
 class _Stage:
-    """What an episode's objects became in the renderer: the mask values of the annotated ones (clutter stays 0),
-    the objects the walk approaches, the floor it walks around and each annotated object's centre."""
+    """What a house's objects became in the renderer: each annotated object's mask value (its index + 1; clutter stays
+    0), how the walk sees it and its body, the floor the walk goes around and each annotated object's centre."""
 
     lut: np.ndarray  # body id + 1 -> mask value
-    legend: dict[int, tuple[str, str]]
-    looks: dict[str, list[Goal]]
-    bodies: dict[Goal, int]
+    looks: list[Goal]
+    bodies: list[int]
     obstacles: list[tuple[float, float, float, float]]
     centres: list[tuple[float, float, float]]
 
@@ -183,62 +196,87 @@ def _footprint(mesh: Mesh) -> tuple[float, float, float]:
     return float(np.hypot(hi[0] - lo[0], hi[1] - lo[1]) / 2), float(hi[2] - lo[2]), mesh.side_area()
 
 
-def _stage(r: Renderer, room: Room, plan: EpisodePlan, rng: np.random.Generator) -> _Stage:
-    """Place the episode's objects (target first), then its clutter: a colour double of each object and the scanned
+def _stage(r: Renderer, house: Room, plan: HousePlan, rng: np.random.Generator) -> _Stage:
+    """Place the house's annotated objects, then its clutter: a colour double of each object and the scanned
     products, so the annotated objects have the pick of the surfaces."""
     built = [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.objects)]
     built += [colour_double(mesh, texture, rng) for mesh, texture in built]
     built += [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.clutter)]
     sizes = [_footprint(mesh) for mesh, _ in built]
-    lookalikes = frozenset(k for k, role in enumerate(plan.roles) if role == "same_category")
-    spots = place_objects(room, sizes, rng, lookalikes, _within_reach(room))
-    stage = _Stage(np.zeros(0, np.uint16), {}, {"target": [], "same_category": []}, {}, list(room.footprints), [])
-    values = {}  # body id -> mask value, for the episode's objects only
+    family = {c: k for k, c in enumerate(dict.fromkeys(s.category for s in plan.objects))}
+    spots = place_objects(house, sizes, rng, [family[s.category] for s in plan.objects], _within_reach(house))
+    stage = _Stage(np.zeros(0, np.uint16), [], [], list(house.footprints), [])
     for k, ((mesh, atlas), (x, y, z, yaw)) in enumerate(zip(built, spots)):
         body = r.add(mesh, atlas, (x, y, z), yaw)
         if z < 0.05:  # on the floor or a rug: the camera walks around it
             rad = sizes[k][0]
             stage.obstacles.append((x - rad, y - rad, x + rad, y + rad))
         if k < len(plan.objects):
-            values[body] = k + 1
-            stage.legend[k + 1] = (plan.objects[k].object_id, plan.roles[k])
+            stage.bodies.append(body)
+            stage.looks.append(_look(mesh, (x, y, z)))
             stage.centres.append((float(x), float(y), float(z + sizes[k][1] / 2)))  # meshes are centred on x, y
-            if plan.roles[k] in stage.looks:
-                stage.looks[plan.roles[k]].append(_look(mesh, (x, y, z)))
-                stage.bodies[stage.looks[plan.roles[k]][-1]] = body
     stage.lut = np.zeros(body + 2, np.uint16)  # bodies are numbered in order: the last one added is the highest
-    stage.lut[[b + 1 for b in values]] = list(values.values())
+    stage.lut[[b + 1 for b in stage.bodies]] = np.arange(1, len(stage.bodies) + 1)
     return stage
 
 
-def render_episode(plan: EpisodePlan) -> tuple[list[FrameRecord], EpisodeGeometry]:
+EpisodeOutput = tuple[str, list[FrameRecord], EpisodeGeometry]
+
+
+def render_house(plan: HousePlan) -> list[EpisodeOutput]:
+    """A house's episodes, in plan order: each walk rendered once and written for every episode that reads it."""
     r = _renderer()
     r.reset()
-    room = make_room(np.random.default_rng(plan.scene_seed))
-    for piece in room.pieces:
+    house = make_house(np.random.default_rng(plan.scene_seed), ROOMS)
+    for piece in house.pieces:
         r.add(piece.mesh, piece.texture)
     rng = np.random.default_rng(plan.seed)
-    stage = _stage(r, room, plan, rng)
+    stage = _stage(r, house, plan, rng)
     light = episode_light(rng)
     camera = house_camera(rng)
     vfov = vertical_fov(HFOV, FRAME_WIDTH, FRAME_HEIGHT)
-    records = []
+    ids = [s.object_id for s in plan.objects]
+    families = [s.category for s in plan.objects]
 
     def sight(look: Goal, pose: Pose) -> float:
         """Pixels of the object seen from ``pose``, from a render at a quarter of the frame's size."""
-        ids = r.render(_camera(pose), FRAME_WIDTH // 4, FRAME_HEIGHT // 4, vfov, light)[1]
-        return 16.0 * float((ids == stage.bodies[look]).sum())
+        pixels = r.render(_camera(pose), FRAME_WIDTH // 4, FRAME_HEIGHT // 4, vfov, light)[1]
+        return 16.0 * float((pixels == stage.bodies[stage.looks.index(look)]).sum())
 
-    walk = camera_walk(room, stage.obstacles, stage.looks["target"][0], stage.looks["same_category"], plan.frames,
-                       rng, sight)
+    if plan.walk == "explore":
+        walk = exploration_walk(house, stage.obstacles, [c[:2] for c in stage.centres], plan.frames, rng)
+        groups = [(walk, list(plan.episodes))]
+    else:
+        groups = [(camera_walk(house, stage.obstacles, stage.looks[t],
+                               [stage.looks[k] for k, f in enumerate(families) if f == families[t] and k != t],
+                               plan.frames, rng, sight), [(episode_id, t)]) for episode_id, t in plan.episodes]
+    out = {}
+    for walk, episodes in groups:
+        records = _render_walk(r, walk, stage, light, camera, plan, episodes)
+        for episode_id, t in episodes:
+            out[episode_id] = (episode_id, records[episode_id],
+                               _episode_geometry(ids, families, t, house, stage.obstacles, walk, stage.centres))
+    return [out[episode_id] for episode_id, _ in plan.episodes]
+
+
+def _render_walk(r: Renderer, walk: list[Pose], stage: _Stage, light: Light, camera, plan: HousePlan,
+                 episodes: list[tuple[str, int]]) -> dict[str, list[FrameRecord]]:
+    """Each pose rendered and developed once, then written for every episode in ``episodes`` with its own roles."""
+    vfov = vertical_fov(HFOV, FRAME_WIDTH, FRAME_HEIGHT)
+    legends = {episode_id: {k + 1: (s.object_id, "target" if k == t else "same_category"
+                                    if s.category == plan.objects[t].category else "other")
+                            for k, s in enumerate(plan.objects)} for episode_id, t in episodes}
+    records: dict[str, list[FrameRecord]] = {episode_id: [] for episode_id, _ in episodes}
     for step, pose in enumerate(walk):
-        rgb, ids, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
+        rgb, bodies, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
         noise = np.random.default_rng(stable_seed(plan.seed, "noise", step))
         image = camera.develop(rgb, noise)
-        frame = Frame(image, stage.lut[ids + 1], stage.legend, depth, _camera_pose(pose))
-        records.append(encode_frame(plan.staging, plan.episode_id, step, frame,
-                                    ImageFile(".jpg", camera.encode(image, noise))))  # stored: the camera's JPEG
-    return records, _episode_geometry(plan, room, stage.obstacles, walk, stage.centres)
+        stored = ImageFile(".jpg", camera.encode(image, noise))  # stored: the camera's JPEG
+        mask = stage.lut[bodies + 1]
+        for episode_id, legend in legends.items():
+            frame = Frame(image, mask, legend, depth, _camera_pose(pose))
+            records[episode_id].append(encode_frame(plan.staging, episode_id, step, frame, stored))
+    return records
 
 
 # ------------------------------------------------------------------ entry point
@@ -249,6 +287,8 @@ def _check(size: SynthSize) -> None:
         raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
     if not size.splits or set(size.splits) - {"train", "val"}:
         raise SynthError(f"splits {list(size.splits)}: render 'train', 'val' or both")
+    if size.walk not in WALKS:
+        raise SynthError(f"walk {size.walk!r}: choose one of {', '.join(WALKS)}")
 
 
 def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Path | None = None,
@@ -272,6 +312,7 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
     rendered_specs = [s for s in specs if s.split in size.splits]
     provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
                       objects_per_family=size.objects_per_family, frames_per_episode=size.frames_per_episode,
+                      walk=size.walk, rooms=ROOMS, targets_per_house=TARGETS_PER_HOUSE,
                       scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
@@ -290,23 +331,23 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions),
                                   origin=ObjectOrigin(spec.source, spec.licence))
             plans = []
-            for episode_id, split, scene_id, objs in plan_episodes(specs, seed, size.episodes):
+            for house_id, split, objs, episodes in plan_houses(specs, seed, size.episodes):
                 if split not in size.splits:
                     continue
-                writer.add_episode(episode_id, split, scene_id, objs[0].object_id, [o.object_id for o in objs[1:]])
-                roles = writer.roles(episode_id)
+                for episode_id, t in episodes:
+                    writer.add_episode(episode_id, split, house_id, objs[t].object_id,
+                                       [o.object_id for k, o in enumerate(objs) if k != t])
                 clutter = choose_scanned([s for s in specs if s.split == split], objs,
-                                         np.random.default_rng(stable_seed(seed, "clutter", episode_id)))
-                plans.append(EpisodePlan(episode_id, split, scene_id, stable_seed(seed, "scene", scene_id),
-                                         stable_seed(seed, "episode", episode_id),
-                                         tuple(objs), tuple(roles[o.object_id] for o in objs), size.frames_per_episode,
-                                         str(writer.staging), tuple(clutter)))
-            for plan, (records, geometry) in zip(plans, tqdm(imap(render_episode, plans), total=len(plans),
-                                                             desc="render episodes", unit="episode",
-                                                             disable=not progress, dynamic_ncols=True)):
-                writer.add_geometry(plan.episode_id, geometry)
-                for rec in records:
-                    writer.add_frame_record(rec)
+                                         np.random.default_rng(stable_seed(seed, "clutter", house_id)))
+                plans.append(HousePlan(house_id, split, stable_seed(seed, "scene", house_id),
+                                       stable_seed(seed, "house", house_id), tuple(objs), tuple(episodes),
+                                       size.frames_per_episode, size.walk, str(writer.staging), tuple(clutter)))
+            for episodes in tqdm(imap(render_house, plans), total=len(plans), desc="render houses", unit="house",
+                                 disable=not progress, dynamic_ncols=True):
+                for episode_id, records, geometry in episodes:
+                    writer.add_geometry(episode_id, geometry)
+                    for rec in records:
+                        writer.add_frame_record(rec)
         finally:
             if pool:
                 pool.close()

@@ -1,14 +1,15 @@
-"""Furnished rooms and where objects go: floor, walls, ceiling, furniture with support surfaces.
+"""Furnished houses and where objects go: rooms joined by doors, furniture with support surfaces.
 
-A room is a pure function of its scene seed, so every episode of one scene sees the same
-room; object placement is drawn from the episode's own generator. Furniture is axis-aligned
-and kept away from the room's middle so the camera walk always has space.
+A house is a row of rooms (``make_house``), each a furnished room (``make_room``) whose shared walls
+open in a door 1 m wide, as PIN's houses join their rooms; the house is a pure function of its
+scene seed, so every episode of one house sees the same rooms. Furniture is axis-aligned, kept
+away from the room's middle and out of the doorways, so the camera walk always has a way through.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -45,13 +46,35 @@ class Piece:
     texture: np.ndarray
 
 
+Rect = tuple[float, float, float, float]  # x0, y0, x1, y1 on the floor (metres)
+
+
 @dataclass
 class Room:
+    """A room, or a house of rooms: its floor spans ``width`` x ``depth``; ``footprints`` are blocked for walking
+    (furniture, and in a house the inner walls and the floor outside a room); ``rooms`` the floor of each room."""
+
     width: float
     depth: float
     pieces: list[Piece] = field(default_factory=list)
     surfaces: list[Surface] = field(default_factory=list)
-    footprints: list[tuple[float, float, float, float]] = field(default_factory=list)  # blocked for walking
+    footprints: list[Rect] = field(default_factory=list)
+    rooms: list[Rect] = field(default_factory=list)
+    keep_clear: list[Rect] = field(default_factory=list)  # doorways: free of furniture and floor objects
+
+    def room_of(self, x: float, y: float) -> int:
+        """The index of the room holding a floor point (the nearest room for a point in a doorway or a wall)."""
+        rooms = self.rooms or [(0.0, 0.0, self.width, self.depth)]
+        gaps = [max(x0 - x, 0.0, x - x1) + max(y0 - y, 0.0, y - y1) for x0, y0, x1, y1 in rooms]
+        return int(np.argmin(gaps))
+
+    def moved(self, dx: float) -> Room:
+        """The room shifted by ``dx`` along x (where a house puts it)."""
+        return Room(self.width, self.depth, [Piece(p.mesh.moved((dx, 0.0, 0.0)), p.texture) for p in self.pieces],
+                    [replace(s, x0=s.x0 + dx, x1=s.x1 + dx) for s in self.surfaces],
+                    [(x0 + dx, y0, x1 + dx, y1) for x0, y0, x1, y1 in self.footprints],
+                    [(x0 + dx, y0, x1 + dx, y1) for x0, y0, x1, y1 in self.rooms or [(0, 0, self.width, self.depth)]],
+                    [(x0 + dx, y0, x1 + dx, y1) for x0, y0, x1, y1 in self.keep_clear])
 
 
 def _boxes(specs: list[tuple[tuple[float, float, float], tuple[float, float, float]]], uv: float = 0.6) -> Mesh:
@@ -144,10 +167,24 @@ def _material(kind: str, rng: np.random.Generator, woods: list[np.ndarray]) -> n
     return tx.wood(rng, woods[int(rng.integers(len(woods)))])
 
 
-def make_room(rng: np.random.Generator) -> Room:
-    """A rectangular room with a floor material, painted walls, a ceiling, a door, a window and 5-8 furniture."""
-    W, D = float(rng.uniform(4.5, 6.5)), float(rng.uniform(4.5, 7.0))
-    room = Room(W, D)
+DOOR_WIDTH = 1.0  # metres: a doorway between two rooms of a house
+WALL = 0.1  # a wall's thickness; two rooms of a house stand two walls apart
+DOORWAY_CLEAR = 1.2  # metres into a room in front of a doorway that furniture and floor objects keep free
+ROOM_SIZE = ((4.5, 6.5), (4.5, 7.0))  # a room's width and depth range (metres)
+HOUSE_ROOM_SIZE = ((3.6, 4.6), (3.8, 5.0))  # a house's rooms, smaller: a house of three is PIN's scale ...
+HOUSE_FURNITURE = (3, 5)  # ... with fewer pieces each, so an exploration's step budget sees most of the house
+
+
+def make_room(rng: np.random.Generator, size: tuple[float, float] | None = None,
+              doors: Sequence[tuple[int, float]] = (), furniture: tuple[int, int] = (5, 8)) -> Room:
+    """A rectangular room with a floor material, painted walls, a ceiling, a door, a window and furniture (a table, a
+    sofa, a shelf and more, ``furniture`` pieces in all, as many as fit).
+
+    ``size`` (width, depth) is drawn from ``ROOM_SIZE`` when not given; ``doors`` are the doorways of a house,
+    (side, y) each: an opening ``DOOR_WIDTH`` wide from y on the wall x = 0 (side 0) or x = width (side 1).
+    """
+    W, D = size if size is not None else (float(rng.uniform(*ROOM_SIZE[0])), float(rng.uniform(*ROOM_SIZE[1])))
+    room = Room(W, D, rooms=[(0.0, 0.0, W, D)])
     woods = [tx.rgb(c) * rng.uniform(0.8, 1.1) for c in rng.choice(["tan", "brown", "beige", "dark brown"], 2)]
     floor_kind = rng.choice(["wood", "carpet", "tiles"])
     floor_tex = (tx.wood(rng, woods[0], planks=4) if floor_kind == "wood" else
@@ -157,16 +194,14 @@ def make_room(rng: np.random.Generator) -> Room:
     room.pieces.append(Piece(box(W, D, 0.02, uv_metres=2.0).moved((W / 2, D / 2, WALL_HEIGHT + 0.01)),
                              tx.solid(tx.rgb("white"), rng, 3)))
     paint = tx.rgb(str(rng.choice(["white", "cream", "beige", "mint", "light blue", "lavender", "grey", "khaki"])))
-    walls = _boxes([((W, 0.1, WALL_HEIGHT), (W / 2, -0.05, WALL_HEIGHT / 2)),
-                    ((W, 0.1, WALL_HEIGHT), (W / 2, D + 0.05, WALL_HEIGHT / 2)),
-                    ((0.1, D, WALL_HEIGHT), (-0.05, D / 2, WALL_HEIGHT / 2)),
-                    ((0.1, D, WALL_HEIGHT), (W + 0.05, D / 2, WALL_HEIGHT / 2))], uv=1.2)
-    room.pieces.append(Piece(walls, tx.wallpaper(rng, tx.shade(paint, 0.95))))
+    room.pieces.append(Piece(_boxes(_walls(W, D, doors), uv=1.2), tx.wallpaper(rng, tx.shade(paint, 0.95))))
     trim = _boxes([((W, 0.02, 0.08), (W / 2, 0.01, 0.04)), ((W, 0.02, 0.08), (W / 2, D - 0.01, 0.04)),
                    ((0.02, D, 0.08), (0.01, D / 2, 0.04)), ((0.02, D, 0.08), (W - 0.01, D / 2, 0.04))])
     room.pieces.append(Piece(trim, tx.solid(tx.rgb("white"), rng, 3)))
-    _wall_decor(room, rng, woods)
-    _furnish(room, rng, woods)
+    clear = [(0.0 if side == 0 else W - DOORWAY_CLEAR, y - 0.2, DOORWAY_CLEAR if side == 0 else W, y + DOOR_WIDTH + 0.2)
+             for side, y in doors]
+    _wall_decor(room, rng, woods, {side for side, _ in doors})
+    _furnish(room, rng, woods, furniture, clear)
     rug_w, rug_d = rng.uniform(1.4, 2.2), rng.uniform(1.0, 1.6)
     rx, ry = W / 2 + rng.uniform(-0.5, 0.5) - rug_w / 2, D / 2 + rng.uniform(-0.5, 0.5) - rug_d / 2
     rug = tx.pattern(str(rng.choice(["striped", "checked", "plaid", "zigzag", "plain"])),
@@ -174,11 +209,60 @@ def make_room(rng: np.random.Generator) -> Room:
                      tx.rgb(str(rng.choice(["cream", "tan", "white"]))), rng, scale=0.4)
     room.pieces.append(Piece(box(rug_w, rug_d, 0.012).moved((rx + rug_w / 2, ry + rug_d / 2, 0.006)), rug))
     room.surfaces.append(Surface(rx + 0.1, ry + 0.1, rx + rug_w - 0.1, ry + rug_d - 0.1, 0.012, 2.0, "rug"))
+    room.keep_clear.extend(clear)
     return room
 
 
-def _wall_decor(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> None:
-    """A door, a window and pictures: large flat shapes that fill the frames with something besides paint."""
+def _walls(W: float, D: float, doors: Sequence[tuple[int, float]]) -> list:
+    """The four walls as boxes (size, centre), the walls x = 0 and x = W cut around their doorways (a lintel above)."""
+    boxes = [((W, WALL, WALL_HEIGHT), (W / 2, -WALL / 2, WALL_HEIGHT / 2)),
+             ((W, WALL, WALL_HEIGHT), (W / 2, D + WALL / 2, WALL_HEIGHT / 2))]
+    for side, x in ((0, -WALL / 2), (1, W + WALL / 2)):
+        cuts = sorted(y for s, y in doors if s == side)
+        y = 0.0
+        for door in cuts:
+            boxes.append(((WALL, door - y, WALL_HEIGHT), (x, (y + door) / 2, WALL_HEIGHT / 2)))
+            boxes.append(((WALL, DOOR_WIDTH, WALL_HEIGHT - 2.05), (x, door + DOOR_WIDTH / 2, (WALL_HEIGHT + 2.05) / 2)))
+            y = door + DOOR_WIDTH
+        boxes.append(((WALL, D - y, WALL_HEIGHT), (x, (y + D) / 2, WALL_HEIGHT / 2)))
+    return boxes
+
+
+def make_house(rng: np.random.Generator, rooms: int) -> Room:
+    """``rooms`` furnished rooms in a row along x, each joined to the next by a doorway through their shared walls.
+
+    The house is one ``Room`` spanning all of them: the walls between rooms and the floor beyond a shorter room are
+    footprints (nothing walks there), ``rooms`` holds each room's floor, and a floor board fills each doorway.
+    """
+    sizes = [(float(rng.uniform(*HOUSE_ROOM_SIZE[0])), float(rng.uniform(*HOUSE_ROOM_SIZE[1]))) for _ in range(rooms)]
+    doors = [float(rng.uniform(0.4, min(a[1], b[1]) - DOOR_WIDTH - 0.4)) for a, b in zip(sizes, sizes[1:])]
+    depth = max(d for _, d in sizes)
+    house = Room(0.0, depth)
+    x = 0.0
+    for k, (w, d) in enumerate(sizes):
+        own = [(0, doors[k - 1])] if k else []
+        own += [(1, doors[k])] if k < rooms - 1 else []
+        room = make_room(rng, (w, d), own, HOUSE_FURNITURE).moved(x)
+        house.pieces += room.pieces
+        house.surfaces += room.surfaces
+        house.footprints += room.footprints
+        house.keep_clear += room.keep_clear
+        house.rooms += room.rooms
+        if d < depth:
+            house.footprints.append((x - 2 * WALL, d, x + w + 2 * WALL, depth))
+        if k < rooms - 1:
+            y = doors[k]
+            house.footprints += [(x + w, 0.0, x + w + 2 * WALL, y), (x + w, y + DOOR_WIDTH, x + w + 2 * WALL, depth)]
+            house.pieces.append(Piece(box(2 * WALL, DOOR_WIDTH, 0.02, uv_metres=1.0).moved(
+                (x + w + WALL, y + DOOR_WIDTH / 2, -0.01)), room.pieces[0].texture))
+        x += w + 2 * WALL
+    house.width = x - 2 * WALL
+    return house
+
+
+def _wall_decor(room: Room, rng: np.random.Generator, woods: list[np.ndarray], door_sides: set[int]) -> None:
+    """A door, a window and pictures: large flat shapes that fill the frames with something besides paint. The window
+    and pictures keep off a wall with a doorway (``door_sides``: 0 the wall x = 0, 1 the wall x = W)."""
     W, D = room.width, room.depth
     door_x = rng.uniform(0.4, W - 1.4)
     room.pieces.append(Piece(box(0.9, 0.04, 2.05, uv_metres=2.1).moved((door_x + 0.45, 0.02, 1.025)),
@@ -187,13 +271,15 @@ def _wall_decor(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -
     glass = tx.solid(np.array([190, 215, 240.0]), rng, 8)
     glass[:, 124:132] = 245
     glass[124:132] = 245
-    room.pieces.append(Piece(box(0.04, 1.4, 1.2).moved((W - 0.02, wy + 0.7, 1.55)), glass))
+    window = box(0.04, 1.4, 1.2).moved((W - 0.02, wy + 0.7, 1.55)) if 1 not in door_sides else \
+        box(1.4, 0.04, 1.2).moved((min(wy, W - 1.6) + 0.7, D - 0.02, 1.55))
+    room.pieces.append(Piece(window, glass))
     for _ in range(int(rng.integers(1, 4))):
         art = tx.pattern(str(rng.choice(["camouflage", "floral", "striped", "polka-dot"])),
                          tx.rgb(str(rng.choice(list(tx.COLOURS)))), tx.rgb(str(rng.choice(list(tx.COLOURS)))), rng)
         art[:10], art[-10:], art[:, :10], art[:, -10:] = 30, 30, 30, 30
         w, h = rng.uniform(0.4, 0.9), rng.uniform(0.4, 0.7)
-        if rng.random() < 0.5:
+        if rng.random() < 0.5 and 0 not in door_sides:
             room.pieces.append(Piece(box(0.03, w, h).moved((0.015, rng.uniform(w, D - w), 1.6)), art))
         else:
             room.pieces.append(Piece(box(w, 0.03, h).moved((rng.uniform(w, W - w), D - 0.015, 1.6)), art))
@@ -205,10 +291,13 @@ def _overlaps(rect, others, margin: float) -> bool:
                for b in others)
 
 
-def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> None:
-    """Put 5-8 pieces of furniture against the walls (tables also free-standing), 0.7 m apart at least."""
+def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray], count: tuple[int, int],
+             clear: Sequence[Rect] = ()) -> None:
+    """Put ``count`` (fewest, most) pieces of furniture against the walls (tables also free-standing), 0.7 m apart at
+    least and off the doorways' ``clear`` rectangles."""
     W, D = room.width, room.depth
-    kinds = ["table", "sofa", "shelf"] + [str(k) for k in rng.choice(FURNITURE, int(rng.integers(2, 6)))]
+    base = ["table", "sofa", "shelf"]
+    kinds = base + [str(k) for k in rng.choice(FURNITURE, int(rng.integers(count[0] - 3, count[1] - 2)))]
     for kind in kinds:
         boxes, surfaces, w, d = _furniture(kind, rng)
         for _ in range(30):
@@ -226,7 +315,8 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> N
             else:
                 x, y = W - fw / 2 - 0.02, rng.uniform(fd / 2, D - fd / 2)
             rect = (x - fw / 2, y - fd / 2, x + fw / 2, y + fd / 2)
-            if rect[0] < 0 or rect[1] < 0 or rect[2] > W or rect[3] > D or _overlaps(rect, room.footprints, 0.7):
+            if rect[0] < 0 or rect[1] < 0 or rect[2] > W or rect[3] > D or _overlaps(rect, room.footprints, 0.7) \
+                    or _overlaps(rect, clear, 0.0):
                 continue
             placed, surf = _rotate_layout(boxes, surfaces, w, d, quarter, x, y)
             room.pieces.append(Piece(_boxes(placed), _material(kind, rng, woods)))
@@ -236,7 +326,7 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray]) -> N
     for _ in range(int(rng.integers(0, 3))):  # plants in free corners: clutter without surfaces
         x, y = rng.choice([0.35, W - 0.35]), rng.choice([0.35, D - 0.35])
         rect = (x - 0.25, y - 0.25, x + 0.25, y + 0.25)
-        if _overlaps(rect, room.footprints, 0.05):
+        if _overlaps(rect, room.footprints, 0.05) or _overlaps(rect, clear, 0.0):
             continue
         h = rng.uniform(0.6, 1.4)
         pot = cylinder(0.16, 0.35, 16, top_radius=0.2).moved((x, y, 0))
@@ -251,7 +341,7 @@ Reach = Callable[[float, float, float], bool]  # whether an agent on the floor g
 
 
 def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.random.Generator,
-                  lookalikes: frozenset[int] = frozenset(), reach: Reach | None = None,
+                  families: Sequence[int | None] = (), reach: Reach | None = None,
                   ) -> list[tuple[float, float, float, float]]:
     """Stand objects (radius, height, side area) on free spots of the room's surfaces: (x, y, z, yaw) each.
 
@@ -268,18 +358,18 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     still a pure function of the seeds. Only a room without any free floor along its walls is
     an error.
 
-    The objects at the indices ``lookalikes`` (the target's same-category look-alikes; the
-    target is the first object) stand at least ``LOOKALIKE_GAP`` from the target where the room
-    allows it, as PIN's look-alikes stand elsewhere in the house: an agent that stops at a
-    look-alike is then more than PIN's 1 m success distance from the target, a category error
-    and not a success.
+    ``families`` labels the annotated objects (the first ``len(families)`` of ``sizes``; None: not
+    annotated): two of one family (a target and its look-alike, whichever is the target) stand at
+    least ``LOOKALIKE_GAP`` apart where the house allows it, as PIN's look-alikes stand elsewhere in
+    the house: an agent that stops at a look-alike is then more than PIN's 1 m success distance from
+    the target, a category error and not a success.
 
     Products face the room, as they stand in a house: the side the first reference view shows
     (``FRONT_AZIMUTH`` of the object) is turned to where its furniture's front looks, or away from
     the wall it stands against, give or take ``FACE_SPREAD``; on a rug, which has no front, the
     yaw is uniform.
 
-    With ``reach``, the target and its look-alikes stand only where it holds for their centre (an
+    With ``reach``, the annotated objects stand only where it holds for their centre (an
     agent standing on the floor beside the furniture can come within PIN's success distance of them),
     as PIN's episodes place the objects an agent must reach; where no spot passes, the rule is
     dropped for that object rather than the episode.
@@ -287,9 +377,10 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
     out = []
     for k, (radius, height, side_area) in enumerate(sizes):
-        away = (taken[0][0], taken[0][1], LOOKALIKE_GAP) if k in lookalikes and taken else None
+        family = families[k] if k < len(families) else None
+        away = tuple((x, y) for (x, y, _, _), f in zip(taken, families) if f is not None and f == family) or None
         near = None
-        if reach is not None and (k == 0 or k in lookalikes):
+        if reach is not None and family is not None:
             def near(x: float, y: float, z: float, half: float = height / 2) -> bool:
                 return reach(x, y, z + half)
         spot = None
@@ -307,7 +398,7 @@ def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.r
     return out
 
 
-Away = tuple[float, float, float] | None  # (x, y, least distance) a spot must keep from, or no constraint
+Away = tuple[tuple[float, float], ...] | None  # points (x, y) a spot keeps LOOKALIKE_GAP from, or no constraint
 Spot = tuple[float, float, float, float | None]  # x, y, z and the direction the spot faces the room (or None)
 
 
@@ -331,7 +422,8 @@ def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float,
 
 def _allowed(x: float, y: float, z: float, away: Away, near: Reach | None) -> bool:
     """Far enough from what ``away`` names, and within reach where ``near`` asks it, of a spot on a surface at z."""
-    return (away is None or np.hypot(x - away[0], y - away[1]) >= away[2]) and (near is None or near(x, y, z))
+    return (away is None or all(np.hypot(x - ax, y - ay) >= LOOKALIKE_GAP for ax, ay in away)) and \
+        (near is None or near(x, y, z))
 
 
 def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
@@ -374,7 +466,8 @@ def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float
             x, y = ((t, u), (t, D - u), (u, t), (W - u, t))[wall]
             if not (lo <= x <= W - lo and lo <= y <= D - lo):
                 continue
-            if _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.05):
+            spot = (x - radius, y - radius, x + radius, y + radius)
+            if _overlaps(spot, room.footprints, 0.05) or _overlaps(spot, room.keep_clear, 0.0):
                 continue
             if _allowed(x, y, 0.0, away, near) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
                                                        for ox, oy, z, r in taken):

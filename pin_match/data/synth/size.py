@@ -15,10 +15,12 @@ class SynthSize:
     seed: int = 0
     episodes: int = 30
     objects_per_family: int = 5
-    frames_per_episode: int = 48
+    frames_per_episode: int = 96  # the exploration's step budget (PIN's episodes: up to 1,000 steps)
     splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
+    walk: str = "explore"  # "explore": blind to the target, one per house; "approach": heads for the target
 
 
+WALKS = ("explore", "approach")  # an exploration blind to the target, one a house; a walk that heads for it
 DEFAULT_SIZE = SynthSize()  # the embedded default set
 # named sizes: ``pin-match synth --preset NAME``. "bench": 100 val episodes, so SR, SPL and CE rank matchers with
 # intervals of about +-10 points (15 episodes move SR in steps of 6.7 points, its interval spanning about +-25)

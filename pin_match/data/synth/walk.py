@@ -1,10 +1,14 @@
-"""A PIN agent's camera walk: explore, pass a look-alike, then approach the target and stop beside it.
+"""A PIN agent's camera walks, with PIN's discrete actions (0.25 m forward, turns of at most 30 degrees) along
+breadth-first paths on a 10 cm occupancy grid (never through furniture or walls).
 
-PIN's episodes are a successful agent walking to its goal: the target is seen far, then
-near, and the episode ends within about 1 m of it, facing it; same-category look-alikes are
-met on the way. The walk does the same with PIN's discrete actions (0.25 m forward, turns of
-at most 30 degrees), along breadth-first paths on a 10 cm occupancy grid (never through
-furniture or walls):
+The default walk, ``exploration_walk``, does not know the target: a look-around, then a tour of
+the house's furniture, nearest first, until its step budget is spent. Every object's episode in a
+house reads that one walk, so targets and look-alikes come in any order, far or near, and the
+walk ends where the exploration does, not beside the target.
+
+The walk that heads for the target, ``camera_walk`` (``--walk approach``), is a successful agent's
+walk: the target is seen far, then near, and the episode ends within about 1 m of it, facing it,
+after a pass by a same-category look-alike. It knows the answer, so it serves first-match studies:
 
 1. a look-around on the spot;
 2. exploration: random places, until the frames the approaches need are all that is left
@@ -47,6 +51,7 @@ MIN_STOP = 0.45  # the closest a stop may be (3D distance from the camera to the
 MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal distance)
 SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
 HALF_VFOV = np.radians(34.3)  # half the vertical field of view of the 640 x 360 portrait frame
+HALF_HFOV = np.radians(21.0)  # half its horizontal field of view
 RUN = (1.0, 1.75)  # the straight run at an object starts this far (metres) behind its stop: the target and a
 # look-alike passed on the way alike, so neither is met larger by construction
 APPROACH_FRAMES = 40  # about what the two approaches take, walking there included; exploration gets the rest
@@ -188,7 +193,8 @@ Sight = Callable[[Goal, Pose], float]  # how many pixels of the object a pose sh
 def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], target: Goal,
                 lookalikes: list[Goal], n_frames: int, rng: np.random.Generator, sight: Sight | None = None,
                 ) -> list[Pose]:
-    """Camera poses (x, y, yaw, pitch): explore, pass one look-alike, approach ``target`` and stop beside it.
+    """The walk that heads for the target (``--walk approach``): explore, pass one look-alike, approach ``target``
+    and stop beside it. It knows the answer, so it serves first-match studies only.
 
     About ``n_frames`` poses: exploration takes what the approaches leave of it (at least a
     look-around), and the approaches always run to the end, so a short ``n_frames`` gives a
@@ -199,7 +205,7 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
     """
     grid = Grid(room, obstacles)
     near = Grid(room, obstacles, NEAR_CLEARANCE)
-    start, reachable = _start(grid, rng, (target.x, target.y))
+    start, reachable = _start(grid, rng, [(target.x, target.y)])
     walk = _Walk(grid, near, reachable, rng, grid.centre(start), float(rng.uniform(-np.pi, np.pi)), sight)
     walk.look_around(int(rng.integers(3, 7)))
     walk.explore(n_frames - APPROACH_FRAMES)
@@ -207,6 +213,90 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
         walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], RUN, stop=False)
     walk.approach(target, RUN, stop=True)
     return walk.poses
+
+
+def exploration_walk(room: Room, obstacles: list[tuple[float, float, float, float]],
+                     away_from: Sequence[tuple[float, float]], n_frames: int, rng: np.random.Generator,
+                     ) -> list[Pose]:
+    """An exploration that does not know the target (``--walk explore``, the default): at most ``n_frames`` poses.
+
+    A look-around where it starts, then a tour of the house's furniture, nearest first by walk: at
+    each piece it stands ``VIEW_DISTANCE`` in front of it, turns to face it and looks at each of its
+    surfaces (tilting down or up as an agent's look-down action, one frame per distinct tilt), then
+    walks on. It reads the house (rooms, furniture) and never which object is the target, so every
+    object's episode in the house reads the same walk; targets and look-alikes come in whatever order
+    and at whatever distance the tour passes them. The walk ends when the budget is spent or every piece
+    was looked at. It starts in the room at the end of the house (a house is a row of rooms) farther on average
+    from the points ``away_from`` (the house's annotated objects, any of which may be a target), ``START_AWAY`` or
+    more of walk from every one of them where the room has such a cell, else at the cell farthest from them (PIN
+    draws a start away from its goal): so the targets lie one or two rooms away as often as in PIN's houses.
+    """
+    grid = Grid(room, obstacles)
+    end_room = max((room.rooms[0], room.rooms[-1]), key=lambda r: float(np.mean(
+        [np.hypot((r[0] + r[2]) / 2 - x, (r[1] + r[3]) / 2 - y) for x, y in away_from] or [0.0]))) \
+        if room.rooms else None
+    start, reachable = _start(grid, rng, away_from, weighted=False, within=end_room)
+    walk = _Walk(grid, Grid(room, obstacles, NEAR_CLEARANCE), reachable, rng, grid.centre(start),
+                 float(rng.uniform(-np.pi, np.pi)), None)
+    walk.look_around(int(rng.integers(3, 7)))
+    views = _viewpoints(room, grid, {tuple(int(v) for v in c) for c in reachable})
+    while views and len(walk.poses) < n_frames:
+        lengths = grid.path_lengths(grid.cell(walk.pos))
+        k = int(np.argmin([lengths[v.cell] for v in views]))
+        walk.look_at(views.pop(k), n_frames)
+    return walk.poses[:n_frames]
+
+
+@dataclass(frozen=True)
+class _View:
+    """Where the tour stands to look at one piece of furniture: a free cell, the headings that sweep the piece from end
+    to end and the surfaces' points."""
+
+    cell: tuple[int, int]
+    headings: tuple[float, ...]
+    looks: tuple[Goal, ...]
+
+
+VIEW_DISTANCE = 0.5  # metres between the front edge of a piece of furniture and where the tour looks at it from
+
+
+def _viewpoints(room: Room, grid: Grid, reachable: set[tuple[int, int]]) -> list[_View]:
+    """One view per piece of furniture with a front (its surfaces share one footprint): the reachable cell nearest the
+    spot ``VIEW_DISTANCE`` in front of it; a piece with no reachable cell within 0.8 m of that spot is skipped."""
+    pieces: dict[tuple[float, float, float], list] = {}
+    for s in room.surfaces:
+        if s.facing is not None:
+            pieces.setdefault((round((s.x0 + s.x1) / 2, 1), round((s.y0 + s.y1) / 2, 1), s.facing), []).append(s)
+    cells = np.array(sorted(reachable))
+    centres = (cells + 0.5) * CELL
+    out = []
+    for (cx, cy, facing), surfaces in pieces.items():
+        front = np.array([np.cos(facing), np.sin(facing)])
+        half = max(abs(front[0]) * (s.x1 - s.x0) + abs(front[1]) * (s.y1 - s.y0) for s in surfaces) / 2
+        spot = np.array([cx, cy]) + front * (half + VIEW_DISTANCE)
+        gap = np.hypot(*(centres - spot).T)
+        if gap.min() > 0.8:
+            continue
+        cell = tuple(int(v) for v in cells[int(np.argmin(gap))])
+        at = grid.centre(cell)
+        looks = tuple(Goal(cx, cy, s.z + 0.1, 0.0) for s in surfaces)
+        out.append(_View(cell, _sweep(at, np.array([cx, cy]), front, surfaces), looks))
+    return out
+
+
+def _sweep(at: np.ndarray, centre: np.ndarray, front: np.ndarray, surfaces: list) -> tuple[float, ...]:
+    """Headings from ``at`` that cover a piece from one end to the other, a turn apart (just its centre's when the
+    whole piece fits the view)."""
+    along = np.array([-front[1], front[0]])
+    half = max(abs(along[0]) * (s.x1 - s.x0) + abs(along[1]) * (s.y1 - s.y0) for s in surfaces) / 2
+    ends = [float(np.arctan2(*(centre + along * side * half - at)[::-1])) for side in (-1.0, 1.0)]
+    mid = float(np.arctan2(*(centre - at)[::-1]))
+    span = abs(_wrap(ends[1] - ends[0]))
+    turns = int(np.ceil(max(span - HALF_HFOV * 2 + np.radians(6), 0.0) / TURN))
+    if not turns:
+        return (mid,)
+    first = _wrap(mid - turns * TURN / 2 * np.sign(_wrap(ends[1] - ends[0])))
+    return tuple(_wrap(first + k * TURN * np.sign(_wrap(ends[1] - ends[0]))) for k in range(turns + 1))
 
 
 def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, float]], start: Sequence[float],
@@ -222,21 +312,32 @@ def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, floa
     return [float(np.min(walked + np.hypot(centres[:, 0] - g[0], centres[:, 1] - g[1]))) for g in goals]
 
 
-def _start(grid: Grid, rng: np.random.Generator, target: tuple[float, float]) -> tuple[tuple[int, int], np.ndarray]:
-    """A start cell in a large connected part of the floor, and the cells reachable from it.
+def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, float]],
+           weighted: bool = True, within: tuple[float, float, float, float] | None = None,
+           ) -> tuple[tuple[int, int], np.ndarray]:
+    """A start cell in a large connected part of the floor (inside the rectangle ``within`` where given), and the
+    cells reachable from it.
 
-    Never within reach of the target: a start cell lies ``START_AWAY`` or more of walk from it (straight
-    distance where the target's cell reaches no free cell), drawn with weight its distance, so the farther
-    corners of the room, where PIN's long episodes would start, come first. A room too small for that
-    starts at its farthest cell.
+    Never within reach of a target: a start cell lies ``START_AWAY`` or more of walk from each of
+    ``targets`` (straight distance where a target's cell reaches no free cell), drawn uniformly or, where
+    ``weighted``, with weight its distance to the nearest, so the farther corners of the room, where PIN's
+    long episodes would start, come first. A room too small for that starts at its farthest cell.
     """
     cells = np.argwhere(grid.free)
+    if within is not None:
+        x0, y0, x1, y1 = within
+        centres = (cells + 0.5) * CELL
+        inside = (centres[:, 0] > x0) & (centres[:, 0] < x1) & (centres[:, 1] > y0) & (centres[:, 1] < y1)
+        cells = cells[inside] if inside.any() else cells
     if not len(cells):
         raise ValueError("room has no free floor for the camera")
-    walked = grid.lengths_to(target)[cells[:, 0], cells[:, 1]]
-    away = np.where(np.isfinite(walked), walked, np.hypot(*((cells + 0.5) * CELL - np.asarray(target)).T))
+    away = np.full(len(cells), np.inf)
+    for target in targets:
+        walked = grid.lengths_to(target)[cells[:, 0], cells[:, 1]]
+        away = np.minimum(away, np.where(np.isfinite(walked), walked,
+                                         np.hypot(*((cells + 0.5) * CELL - np.asarray(target)).T)))
     far = np.flatnonzero(away >= START_AWAY)
-    weights = away[far] / away[far].sum() if len(far) else None
+    weights = away[far] / away[far].sum() if len(far) and weighted else None
     reach: dict = {}
     for _ in range(20):
         k = int(rng.choice(far, p=weights)) if len(far) else int(np.argmax(away))
@@ -303,6 +404,26 @@ class _Walk:
             self.go_to(goal, budget)
             if len(self.poses) < budget:
                 self.turn_to(float(self.rng.uniform(-np.pi, np.pi)))
+
+    def look_at(self, view: _View, budget: int) -> None:
+        """Walk to a view, face its furniture and look along it: one heading per turn from the end nearer its heading
+        to the other (a wide table does not fit the 42 degree view), each at the tilt that brings the piece's surfaces
+        into view (their mean height)."""
+        self.go_to(view.cell, budget)
+        if len(self.poses) >= budget or self.grid.cell(self.pos) != view.cell:
+            return
+        look = Goal(view.looks[0].x, view.looks[0].y, float(np.mean([g.z for g in view.looks])), 0.0)
+        tilt = _pitch_for(self.pos, look, centre=False)
+        headings = view.headings
+        if abs(_wrap(headings[-1] - self.yaw)) < abs(_wrap(headings[0] - self.yaw)):
+            headings = headings[::-1]
+        for yaw in headings:
+            self.pitch = 0.0
+            self.turn_to(yaw)
+            if tilt != 0.0 or self.poses[-1][2:] != (self.yaw, 0.0):
+                self.pitch = tilt
+                self.emit()
+        self.pitch = 0.0
 
     def approach(self, look: Goal, run: tuple[float, float], stop: bool) -> None:
         """Walk to a spot ``run`` metres further out than the stop, then straight at ``look``, facing it each step."""

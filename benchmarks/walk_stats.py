@@ -1,0 +1,91 @@
+"""What a synthetic set's walks are like: ``python -m benchmarks.walk_stats FRAMESET [--split val]``.
+
+Per split: frames per episode and rendered per episode (a house's walk rendered once for its
+episodes), the start-to-target geodesic, the share of episodes starting in another room than the
+target, and, over the episodes whose target is seen at ``SEEN_PX`` pixels or more, the share where a
+same-family look-alike is first seen so before the target and where the target is first seen in the
+first half of the walk (issue 64's checks; docs/synthetic.md).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+
+import numpy as np
+
+from pin_match.data.compose import stable_seed
+from pin_match.data.frameset import FrameSet
+
+SEEN_PX = 1000
+
+
+def first_seen(fs: FrameSet, episode_id: str, role: str) -> int | None:
+    """The first step of the episode where an object of ``role`` shows ``SEEN_PX`` pixels or more."""
+    vis = fs.visibility[(fs.visibility.role == role) & (fs.visibility.pixels >= SEEN_PX)]
+    steps = fs.frames.set_index("frame_id").loc[vis.frame_id, ["episode_id", "step"]]
+    steps = steps[steps.episode_id == episode_id].step
+    return int(steps.min()) if len(steps) else None
+
+
+def rooms_of(fs: FrameSet) -> dict[str, tuple[int, int]]:
+    """Per episode, (room of the start, room of the target), from the house its scene seed rebuilds."""
+    from pin_match.data.synth.generate import ROOMS
+    from pin_match.data.synth.scene import make_house
+
+    seed = int(fs.manifest["provenance"]["seed"])
+    houses = {}
+    out = {}
+    for episode_id, house_id, target in zip(fs.episodes.episode_id, fs.episodes.scene_id,
+                                            fs.episodes.target_object_id):
+        if house_id not in houses:
+            houses[house_id] = make_house(np.random.default_rng(stable_seed(seed, "scene", house_id)), ROOMS)
+        geometry = fs.geometry.episodes[episode_id]
+        tx, ty, _ = geometry.positions[target]
+        house = houses[house_id]
+        out[episode_id] = (house.room_of(geometry.start.x, geometry.start.y), house.room_of(tx, ty))
+    return out
+
+
+def rendered(fs: FrameSet, per_episode) -> int:
+    """Frames rendered: an exploration walk once per house, a walk that heads for its target once per episode."""
+    if fs.manifest["provenance"].get("walk", "approach") == "approach":
+        return int(per_episode.sum())
+    house = fs.episodes.set_index("episode_id").scene_id
+    return int(per_episode.groupby(house.loc[per_episode.index].to_numpy()).first().sum())
+
+
+def stats(fs: FrameSet) -> dict:
+    per_episode = fs.frames.groupby("episode_id").size()
+    houses = fs.episodes.groupby("scene_id").size()
+    geodesic = np.array([fs.geometry.episodes[e].geodesic_distance for e in fs.episodes.episode_id])
+    rooms = rooms_of(fs)
+    seen = lookalike_first = early = 0
+    for episode_id, frames in per_episode.items():
+        target = first_seen(fs, episode_id, "target")
+        if target is None:
+            continue
+        seen += 1
+        lookalike = first_seen(fs, episode_id, "same_category")
+        lookalike_first += lookalike is not None and lookalike < target
+        early += target < frames / 2
+    return dict(episodes=len(per_episode), houses=len(houses), frames=int(per_episode.sum()),
+                frames_per_episode=float(per_episode.mean()),
+                rendered_per_episode=rendered(fs, per_episode) / len(per_episode),
+                geodesic_min_median_max=[float(geodesic.min()), float(np.median(geodesic)), float(geodesic.max())],
+                other_room_pct=100 * float(np.mean([a != b for a, b in rooms.values()])),
+                target_seen=seen, lookalike_first_pct=100 * lookalike_first / max(seen, 1),
+                target_in_first_half_pct=100 * early / max(seen, 1))
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("frameset")
+    parser.add_argument("--split", default=None)
+    a = parser.parse_args()
+    fs = FrameSet.load(a.frameset)
+    print(json.dumps(stats(fs.split(a.split) if a.split else fs), indent=1))
+
+
+if __name__ == "__main__":
+    main()
