@@ -197,14 +197,19 @@ def _footprint(mesh: Mesh) -> tuple[float, float, float]:
 
 
 def _stage(r: Renderer, house: Room, plan: HousePlan, rng: np.random.Generator) -> _Stage:
-    """Place the house's annotated objects, then its clutter: a colour double of each object and the scanned
-    products, so the annotated objects have the pick of the surfaces."""
+    """Place the house's annotated objects (in an order drawn from ``rng``, so which of them is an episode's target
+    never decides who gets the best spot), then its clutter: a colour double of each object and the scanned products,
+    so the annotated objects have the pick of the surfaces."""
     built = [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.objects)]
     built += [colour_double(mesh, texture, rng) for mesh, texture in built]
     built += [(scan.mesh, scan.texture) for scan in (s.load() for s in plan.clutter)]
     sizes = [_footprint(mesh) for mesh, _ in built]
     family = {c: k for k, c in enumerate(dict.fromkeys(s.category for s in plan.objects))}
-    spots = place_objects(house, sizes, rng, [family[s.category] for s in plan.objects], _within_reach(house))
+    order = [*rng.permutation(len(plan.objects)).tolist(), *range(len(plan.objects), len(built))]
+    placed = place_objects(house, [sizes[k] for k in order], rng,
+                           [family[plan.objects[k].category] for k in order[:len(plan.objects)]], _within_reach(house))
+    spots = [placed[order.index(k)] for k in range(len(built))]  # annotated objects in a drawn order: a target gets
+    # no better spot than its look-alikes, as it would if it were placed first
     stage = _Stage(np.zeros(0, np.uint16), [], [], list(house.footprints), [])
     for k, ((mesh, atlas), (x, y, z, yaw)) in enumerate(zip(built, spots)):
         body = r.add(mesh, atlas, (x, y, z), yaw)
