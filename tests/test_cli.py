@@ -228,10 +228,12 @@ def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frame
     look-alikes (``lookalikes/``) first, where recognition can be measured, the scanned set (the demo folder itself)
     second."""
     import shutil
+    from dataclasses import replace
 
     from markupsafe import escape
 
-    from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED
+    from pin_match.data.frameset import FrameSet
+    from pin_match.evaluation.flows.demo import LOOKALIKES, SCANNED, SIGMAS_TO_SHIP, shipped_sigmas
 
     shutil.copytree(tiny_frameset.root, tmp_path / "demo" / "frameset")  # no seed recorded: kept as the scanned set
     assert main(["demo", "--out", str(tmp_path / "demo"), "--matcher", "color", "--matcher", "sift",
@@ -248,6 +250,11 @@ def test_demo_ends_with_one_index_linking_every_report_and_comparison(tiny_frame
     captions = [text.index(escape(c)) for c in (LOOKALIKES.caption, SCANNED.caption)]
     assert captions[0] < captions[1] < text.index("Reports and comparisons")
     assert "scanned products" in SCANNED.caption and LOOKALIKES.caption.startswith("real photos")
+    for s in (LOOKALIKES, SCANNED):  # what a run that tuned writes to ship is taken as shipped by the next run
+        here = tmp_path / "demo" / s.folder
+        written = here / SIGMAS_TO_SHIP
+        as_shipped = replace(s, matchers=("color", "sift"), sigmas=str(written))
+        assert shipped_sigmas(as_shipped, FrameSet.load(here / "frameset"))[0] == written
 
 
 def test_demo_also_shows_real_look_alikes(tiny_frameset, tmp_path, capsys):
@@ -432,3 +439,21 @@ def test_score_takes_several_matchers_in_one_pass_and_refuses_a_repeat(tiny_fram
     assert rc == 2 and "a matcher is named twice" in err
     rc, _, err = _run(capsys, "score", tiny_frameset.root, "--matcher", "color", "--matcher", "sift", "--cfg", "k=1")
     assert rc == 2 and "--cfg/--weights with 2 matchers" in err
+
+
+def test_trade_on_a_set_without_geometry_tunes_by_first_match_and_says_so(tiny_frameset, tmp_path, capsys):
+    """Issue 66.4: without geometry SR cannot be estimated, so ``trade`` with no --objective tunes each policy by
+    first-match (the share of episodes committed to the target) and its printed line says which and why; an
+    objective asked for is used as asked."""
+    common = ("trade", tiny_frameset.root, "--matcher", "color", "--policy", "look:0,look:rest", "--bootstrap", "20",
+              "--out", tmp_path / "trade", "--workers", "1", "--quiet")
+    rc, out, err = _run(capsys, *common)
+    assert rc == 0, err
+    first = out.splitlines()[0]
+    assert first.startswith("sigma tuned (first-match) on train for each policy, read on val; first-match, the "
+                            "share of episodes committed to the target, as SR cannot be estimated: the frame-set "
+                            "records no geometry")
+    assert (tmp_path / "trade" / "trade.csv").is_file() and "('color', 'look:0')" in out
+    rc, out, err = _run(capsys, *common, "--objective", "f1")
+    assert rc == 0, err
+    assert out.splitlines()[0] == "sigma tuned (f1) on train for each policy, read on val"

@@ -6,6 +6,7 @@ still runs (it tunes on the train split again, minutes longer) and this test say
 
 from __future__ import annotations
 
+import shutil
 from dataclasses import replace
 
 import pytest
@@ -59,9 +60,9 @@ def test_shipped_sigmas_follow_the_set_s_definition_not_its_bytes(tmp_path):
     there = _built(tmp_path / "there", provenance, 91)  # another machine's bytes
     assert here.fingerprint != there.fingerprint
     shipped = tmp_path / "shipped.json"
-    atomic.write_json(shipped, dict(definition=set_definition(here), frameset_fingerprint=here.fingerprint,
-                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
     demo_set = replace(SCANNED, matchers=("color",), sigmas=str(shipped))  # an absolute path replaces the folder
+    atomic.write_json(shipped, dict(definition=set_definition(demo_set, here), frameset_fingerprint=here.fingerprint,
+                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
     assert shipped_sigmas(demo_set, there) == (shipped, "shipped (shipped.json: tuned on the train split of a set "
                                                         "of this definition)")
     for change, word in ((dict(seed=1), "seed"), (dict(version=6), "version")):
@@ -70,6 +71,53 @@ def test_shipped_sigmas_follow_the_set_s_definition_not_its_bytes(tmp_path):
         assert path is None and f"another definition of the set ({word})" in why and "--tune" in why
     path, why = shipped_sigmas(replace(demo_set, matchers=("color", "sift")), there)
     assert path is None and f"not for {create_matcher('sift').id}" in why
+
+
+REFUSED = ("the shipped ones were tuned on another definition of the set (content: the packaged objects or photos, or "
+           "the code that renders them): tuned on its train split instead (`pin-match demo --tune` writes the table "
+           "to ship)")
+# per demo set, one packaged object or photo folder and one module that renders it
+CONTENT = {"scanned.json": ("data/synth/gso/scans", "data/synth/render.py"),
+           "lookalikes.json": ("data/sources/lookalike_src/photos", "data/sources/lookalike_set.py")}
+
+
+def _flip_a_byte(path) -> bytes:
+    """Change one byte of ``path`` in place; its bytes before."""
+    before = path.read_bytes()
+    data = bytearray(before)
+    data[len(data) // 2] ^= 1
+    path.write_bytes(bytes(data))
+    return before
+
+
+@pytest.mark.parametrize("demo_set", DEMO_SETS, ids=lambda s: s.sigmas)
+def test_a_change_of_content_under_the_same_version_does_not_get_the_shipped_sigmas(demo_set, tmp_path, monkeypatch):
+    """Issue 66.3: the definition digests what the builder reads, wherever the package lies and whatever its files'
+    times; one byte changed in a packaged scan or photo, or in the code that renders it, under the same generator
+    version, is another set: its shipped sigmas are refused with the line the demo prints."""
+    from pin_match import atomic
+    from pin_match.contract.registry import create_matcher
+    from pin_match.evaluation.flows import demo
+
+    package = tmp_path / "elsewhere" / "pin_match"  # copied with new times, in another folder
+    shutil.copytree(demo.PACKAGE / "data", package / "data", copy_function=shutil.copy,
+                    ignore=shutil.ignore_patterns("__pycache__"))
+    assert demo.reads_digest(package, demo_set.reads) == demo_set.content()
+    monkeypatch.setattr(demo, "PACKAGE", package)
+    fs = _built(tmp_path / "set", dict(generator="pin_match.data.synth", version=6, seed=0, episodes=2), 90)
+    shipped = tmp_path / "shipped.json"
+    ours = replace(demo_set, matchers=("color",), sigmas=str(shipped))
+    atomic.write_json(shipped, dict(definition=demo.set_definition(ours, fs),
+                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
+    assert demo.shipped_sigmas(ours, fs)[0] == shipped
+    folder, module = CONTENT[demo_set.sigmas]
+    for changed in (sorted((package / folder).iterdir())[0], package / module):
+        before = _flip_a_byte(changed)
+        demo.reads_digest.cache_clear()  # read once per process: a new process would read the changed byte
+        assert demo.shipped_sigmas(ours, fs) == (None, REFUSED), changed
+        changed.write_bytes(before)
+        demo.reads_digest.cache_clear()
+        assert demo.shipped_sigmas(ours, fs)[0] == shipped
 
 
 def _val_only(root, provenance: dict, shade: int, frames: int = 2):
@@ -100,9 +148,9 @@ def test_the_val_split_alone_of_the_same_definition_gets_the_shipped_sigmas(tmp_
     provenance = dict(generator="pin_match.data.synth", version=6, seed=0, episodes=2)
     whole = _built(tmp_path / "whole", provenance, 90)
     shipped = tmp_path / "shipped.json"
-    atomic.write_json(shipped, dict(definition=set_definition(whole),
-                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
     demo_set = replace(SCANNED, matchers=("color",), sigmas=str(shipped))
+    atomic.write_json(shipped, dict(definition=set_definition(demo_set, whole),
+                                    thresholds={create_matcher("color").id: {"sigma": 0.8}}))
     assert shipped_sigmas(demo_set, _val_only(tmp_path / "val", provenance, 91))[0] == shipped
     path, why = shipped_sigmas(demo_set, _val_only(tmp_path / "longer", provenance, 91, frames=3))
     assert path is None and "another definition of the set (val)" in why

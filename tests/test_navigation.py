@@ -10,6 +10,7 @@ import pandas as pd
 import pytest
 
 from conftest import make_view
+from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import (
     AGENT_RADIUS,
@@ -93,7 +94,7 @@ def stop_of(fs: FrameSet, scores: list[float], sigma: float = 0.5, geometry: dic
 def test_a_match_on_the_target_3_m_ahead_is_a_success(walk_set):
     # steps 0 and 3 also match the target, but 6 m away: no depth in PIN's range, so the agent walks on
     stop = stop_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9])
-    assert stop.outcome == "success" and stop.stop_step == 4 and stop.unplaced_firings == 2
+    assert stop.outcome == "success" and stop.stop_step == 4 and stop.unplaced_candidates == 2
     assert stop.landed_on == "target"
     np.testing.assert_allclose([stop.point_x, stop.point_y, stop.point_z], TARGET, atol=1e-9)
     assert (stop.stand_x, stop.stand_y) == pytest.approx((3.0 - BACK, 0.0))  # on the floor, short of the point
@@ -124,7 +125,7 @@ def test_a_match_elsewhere_is_neither_success_nor_category_error(walk_set):
 
 def test_no_match_is_not_found_with_d2g_from_where_the_agent_stands(walk_set):
     stop = stop_of(walk_set, [0.1] * len(WALK))
-    assert stop.outcome == "not found" and stop.stop_step is None and stop.unplaced_firings == 0
+    assert stop.outcome == "not found" and stop.stop_step is None and stop.unplaced_candidates == 0
     # measured as a stop's: the agent's position on the floor (1, 0, 0), not its camera, to the target
     assert (stop.stand_x, stop.stand_y) == (1.0, 0.0) and stop.d2g == pytest.approx(math.hypot(2.0, HEIGHT))
     assert stop.steps == 5 and stop.path == pytest.approx(4.0) and stop.spl == 0.0
@@ -171,7 +172,7 @@ def test_the_floor_map_stands_on_the_part_of_the_floor_the_agent_can_walk_to():
         FloorMap(np.zeros((3, 3), bool), 1.0)
 
 
-def test_a_floor_map_is_stored_beside_the_episode_and_read_back(walk_set, tmp_path):
+def test_a_floor_map_is_stored_beside_the_episode_and_read_back(tmp_path):
     floor = FloorMap(np.eye(6, 8, dtype=bool), 0.05, (1.0, -2.0))
     w = FrameSetWriter(tmp_path / "mapped", camera=CameraModel(90.0))
     w.add_object("o", "mug", "val", [make_view((1, 2, 3))] * 3, ["a", "b", "c"])
@@ -184,10 +185,16 @@ def test_a_floor_map_is_stored_beside_the_episode_and_read_back(walk_set, tmp_pa
     assert (read.free == floor.free).all() and (read.cell, read.origin) == (0.05, (1.0, -2.0))
     assert fs.episode_records[0]["floor_map"]["file"] == "maps/e.png"
     before = fs.fingerprint
+    assert FrameSet.load(fs.root).fingerprint == before
+    other = FloorMap(floor.free.copy(), floor.cell, floor.origin)
+    other.free[0, 1] = True  # one more standable cell: the same tables and frames, another floor
+    atomic.write_image(fs.root / "maps" / "e.png", other.image())
+    changed = FrameSet.load(fs.root)
+    assert (changed.geometry.episodes["e"].floor_map.free == other.free).all()
+    assert changed.fingerprint != before  # the map is part of what the fingerprint hashes
     (fs.root / "maps" / "e.png").write_bytes(b"")
     with pytest.raises(GeometryError, match=r"episode 'e': floor_map .* missing or empty file .*e\.png"):
         FrameSet.load(fs.root)
-    assert before != walk_set.fingerprint
 
 
 def test_metrics_are_shares_of_episodes_and_means(walk_set):
@@ -217,6 +224,20 @@ def test_evaluate_report_and_tables_carry_the_estimate(walk_set, tmp_path):
     assert list(side_by_side([report_row(result)]).columns[2:8]) == ["SR", "SPL", "CE", "D2G", "Steps", "Not found"]
     page = (tmp_path / "report" / "report.html").read_text()
     assert "What the agent would do" in page and "episode e: success" in page
+
+
+def test_the_report_page_says_where_the_agent_stands(walk_set, tmp_path):
+    """Issue 66.4: the page describes the standing rule (``navigation.standing_point``), not a walk to the goal."""
+    import re
+
+    from markupsafe import escape
+
+    report(table_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9]), walk_set, tmp_path / "report",
+           sigma=SigmaChoice(0.5, "given", "test"))
+    page = " ".join(re.sub(r"<[^>]+>", " ", (tmp_path / "report" / "report.html").read_text()).split())
+    assert escape("stands on the floor nearest it: the floor map's standable cell nearest the goal or, without a "
+                  "map, the floor below the goal, short of it by the agent's radius and a margin") in page
+    assert "median point and stops" not in page
 
 
 def test_sigma_tuned_for_sr_sees_what_first_match_cannot(walk_set):
@@ -445,6 +466,6 @@ def test_depth_at_the_sensor_s_far_limit_is_no_depth(walk_set, monkeypatch):
     """Issue 60.6: a clipping sensor reports everything beyond its range at exactly 5 m; such a point is not placed."""
     monkeypatch.setattr(FrameSet, "depth", lambda self, frame_id: np.full((SIZE, SIZE), 5.0, np.float32))
     stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0])
-    assert stop.outcome == "not found" and stop.unplaced_firings == 1
+    assert stop.outcome == "not found" and stop.unplaced_candidates == 1
     monkeypatch.setattr(FrameSet, "depth", lambda self, frame_id: np.full((SIZE, SIZE), 4.99, np.float32))
-    assert stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0]).unplaced_firings == 0
+    assert stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0]).unplaced_candidates == 0

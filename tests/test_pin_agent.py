@@ -457,35 +457,175 @@ def test_depth_out_of_range_markers_become_no_depth(open_recorder, tmp_path):
 
 
 # ---------------------------------------------------------------------- detector: a stop policy run live
-def test_a_look_further_policy_runs_live_as_offline_on_a_replayed_episode(tiny_frameset):
-    """A recorded walk (the val frames in the order look-alike, other, target, nothing, look-alike) replayed through
-    the detector twice: under PIN's rule to read each step's score (the best of its two squares), then under look:2,
-    which must stay silent until it commits where the offline rule on those scores commits, to its candidate."""
-    from pin_match.evaluation.core.stop import LookFurther, one_walk
+def live_walk(detector, walk, references, captions):
+    """A walk of frames through the agent's loop, one reset; per step whether the agent found the goal and what each
+    square's call returned."""
+    detector.reset()
+    found, returned = [], []
+    for rgb in walk:
+        maps = [detector(square, references, category=captions) for square in agent_squares(rgb)[1:]]
+        returned.append(maps)
+        found.append(any(bool(m.any()) for m in maps))
+    return found, returned
+
+
+def test_stop_policies_run_live_at_a_real_sigma_on_a_replayed_walk(tiny_frameset):
+    """color on the val episode scores the target's top square 0.3292, its bottom square 0.3271 and every other
+    frame 0 (checked first). The walk: look-alike, target, other, target, nothing, nothing (steps 0-5). Expected
+    decisions by hand, each also what the offline rule gives on the same scores."""
+    from pin_match.evaluation.core.stop import Decision, StopPolicy, one_walk
 
     references, captions = pin_references(tiny_frameset, "mug_c")
-    walk = [tiny_frameset.image(f"ep_val_{k:04d}") for k in (1, 2, 0, 3, 1)]
-    pin = PinDetector("color", sigma=0.0)
-    pin.reset()
-    scores = []
-    for rgb in walk:
-        square_scores = []
-        for square in agent_squares(rgb)[1:]:
-            pin(square, references, category=captions)
-            square_scores.append(pin.last_score)
-        scores.append(max(square_scores))
-    sigma = 0.0  # every step fires: the look-alike opens the window, the target (color's only score above 0) wins
-    offline = LookFurther(window=2).decide(one_walk(np.array(scores)), sigma)[0]
-    assert (offline.fired, offline.stop, offline.chosen) == (0, 2, 2) and scores[2] > max(scores[:2])
-    live = PinDetector("color", sigma=sigma, policy="look:2")
-    live.reset()
-    for step, rgb in enumerate(walk):
-        _, top, bottom = agent_squares(rgb)
-        maps = [live(square, references, category=captions) for square in (top, bottom)]
-        if step < offline.stop:
-            assert live.committed is None and not any(m.any() for m in maps)
-    assert (live.committed.step, live.committed.at_step) == (offline.chosen, offline.stop)
-    assert live.committed.score == pytest.approx(scores[offline.chosen])
-    assert live.committed.maps[-1].any() or live.committed.maps[0].any()
+    oracle = create_matcher("color")
+    oracle.prepare(tiny_frameset.target("mug_c"))
+    walk = [tiny_frameset.image(f"ep_val_{k:04d}") for k in (1, 0, 2, 0, 3, 3)]
+    squares = [[oracle.match(np.array(s)).score for s in agent_squares(rgb)[1:]] for rgb in walk]
+    assert squares[1] == squares[3] and 0.328 < squares[1][0] < 0.33 and 0.325 < squares[1][1] < 0.328
+    assert all(score == 0.0 for k in (0, 2, 4, 5) for score in squares[k])
+    scores = np.array([max(pair) for pair in squares])
+    # at 0.328 only the target's top square counts: 2-of-3 fires at step 3 (steps 1 and 3 count) and commits there,
+    # as soon as the top square has scored; the top square's call returns its points, the bottom one's nothing
+    two = PinDetector("color", sigma=0.328, policy="2-of-3")
+    found, returned = live_walk(two, walk, references, captions)
+    assert found == [False, False, False, True, False, False]
+    assert returned[3][0].any() and not returned[3][1].any()
+    assert two.decision == Decision(3, 3, 3, (3,), 0) == StopPolicy(2, 3).decide(one_walk(scores), 0.328)[0]
+    assert (two.committed.step, two.committed.at_step) == (3, 3)
+    # at 0.2 both target squares count; look:2 opens at step 1 and closes at step 3 on two equal candidates: the
+    # first (step 1), an earlier step's, so the commit comes with step 3's last square (step 1's maps merged)
+    look = PinDetector("color", sigma=0.2, policy="look:2")
+    found, returned = live_walk(look, walk, references, captions)
+    assert found == [False, False, False, True, False, False] and not returned[3][0].any()
+    assert look.decision == Decision(1, 3, 1, (1, 3), 0) == StopPolicy.parse("look:2").decide(one_walk(scores), 0.2)[0]
+    assert torch.equal(returned[3][1], torch.maximum(*look.committed.maps)) and look.committed.maps[0].any()
+    assert (look.committed.step, look.committed.at_step) == (1, 3)
+    # look:5 opens at step 1 and would close at step 6: the walk ends first, so the agent is still looking
+    still = PinDetector("color", sigma=0.2, policy="look:5")
+    found, _ = live_walk(still, walk, references, captions)
+    assert not any(found) and still.committed is None and still.decision == Decision(1, None, None, (1, 3), 0)
     with pytest.raises(PinAgentError, match="reads where the recording ends"):
         PinDetector("color", sigma=0.5, policy="look:rest")
+
+
+# a hand-set matcher: the test says what each square scores, one point per square at (square, step mod 8)
+HAND_REFERENCES = np.full((3, 8, 8, 4), 255, np.uint8)
+SQUARE = np.zeros((8, 8, 3), np.uint8)
+
+
+def hand_detector(policy, sigma: float = 0.5):
+    from toys import HandSet
+
+    return PinDetector(HandSet(), sigma=sigma, resize_dim=8, policy=policy)
+
+
+def hand_step(detector, step: int, square_scores) -> list[torch.Tensor]:
+    """One step of the agent: each square scored as the test says; what each call returned."""
+    from pin_match.contract.results import MatchResult
+
+    maps = []
+    for square, score in enumerate(square_scores):
+        detector.matcher.result = MatchResult(score=float(score), points=[[square, step % 8]])
+        maps.append(detector(SQUARE, HAND_REFERENCES, category=None))
+    return maps
+
+
+def test_a_candidate_the_agent_cannot_place_is_passed_over_live_as_offline():
+    """Gap 1 of issue 64: the detector decided with every candidate placeable, so a commit to a candidate without
+    depth never stopped the agent. The agent tells it at reset which steps it can place, here from each step's depth
+    at the candidate's points (step 1's points fall where the depth is out of PIN's range)."""
+    from pin_match.evaluation.core.stop import Decision, LookFurther, one_walk
+
+    depth = {step: np.full((8, 8), 2.0) for step in range(6)}
+    depth[1][:] = 6.0  # beyond PIN's 5 m
+    scores = [0.1, 0.9, 0.2, 0.7, 0.1, 0.1]
+    detector = hand_detector("look:1")
+
+    def placeable(step: int) -> bool:
+        return any(bool((depth[step][m > 0] < 5.0).any()) for m in detector.candidate_maps(step))
+
+    detector.reset(placeable=placeable)
+    found = [any(m.any() for m in hand_step(detector, step, (score, 0.0))) for step, score in enumerate(scores)]
+    assert detector.decision == Decision(3, 4, 3, (3,), 1)  # step 1 passed over; step 3 opens the window
+    assert found == [False] * 4 + [True, False]
+    offline = LookFurther(window=1).decide(one_walk(np.array(scores)), 0.5, lambda step: step != 1)[0]
+    assert offline == detector.decision
+
+
+@pytest.mark.parametrize("policy", ["2-of-3", "house:top1+0.2", "look:0@2-of-3"])
+def test_the_first_square_s_map_comes_back_when_the_step_commits_on_it(policy):
+    """Gap 2 of issue 64: under any policy but 1-of-1 the first square's call returned an empty map, so a target seen
+    in the top square only was never found. The target is in the top square alone: under k-of-n at steps 0 and 1
+    (0.6, 0.9; it fires at step 1); under house:top1+0.2 at step 2 (0.9 clears the level 0.45 + 0.2 and sigma 0.5;
+    steps 0 and 1 score 0.4 and 0.45, below their lines)."""
+    detector = hand_detector(policy)
+    detector.reset()
+    tops = [0.4, 0.45, 0.9] if policy.startswith("house") else [0.6, 0.9, 0.1]
+    commit_step = 2 if policy.startswith("house") else 1
+    for step, top in enumerate(tops):
+        maps = hand_step(detector, step, (top, 0.1))
+        assert bool(maps[0].any()) == (step == commit_step) and not maps[1].any()
+    assert detector.committed.step == commit_step and detector.committed.at_step == commit_step
+
+
+def test_every_square_s_map_of_the_candidate_comes_back_at_the_commit():
+    """Gap 3 of issue 64: only the last square's map came back when a policy committed. Step 1 shows the target in
+    both squares: each call returns its own square's points, and ``committed`` holds both."""
+    detector = hand_detector("2-of-3")
+    detector.reset()
+    assert not any(m.any() for m in hand_step(detector, 0, (0.8, 0.2)))
+    top, bottom = hand_step(detector, 1, (0.7, 0.9))
+    assert top[1, 0] == 1.0 and top.sum() == 1 and bottom[1, 1] == 1.0 and bottom.sum() == 1
+    assert all(torch.equal(a, b) for a, b in zip(detector.committed.maps, (top, bottom)))
+    assert not any(m.any() for m in hand_step(detector, 2, (0.9, 0.9)))  # committed: nothing more
+
+
+def test_a_thresholds_file_tuned_for_another_policy_is_refused_by_the_detector(tiny_frameset, tmp_path):
+    """Gap 4 of issue 64: a sigma tuned for one stop policy was used under another without a word."""
+    from pin_match.evaluation.core.policies import tune_policy
+    from pin_match.evaluation.core.sigma import PolicyMismatchError
+    from pin_match.evaluation.core.stop import LookFurther
+    from pin_match.evaluation.core.tuning import tune, write_thresholds
+    from pin_match.scoring import RunOptions, score
+
+    table = score(tiny_frameset, "color", out=tmp_path / "scores", run=RunOptions(progress=False))
+    pin = write_thresholds(tune(table, tiny_frameset), tmp_path / "pin.json")
+    looked = write_thresholds(tune_policy(table, tiny_frameset, LookFurther(window=2)), tmp_path / "look.json")
+    assert PinDetector("color", thresholds=looked, policy="look:2").sigma_choice.source.endswith("for look:2")
+    with pytest.raises(PolicyMismatchError, match=r"look\.json was tuned for stop policy look:2, not 1-of-1"):
+        PinDetector("color", thresholds=looked)
+    with pytest.raises(PolicyMismatchError, match=r"pin\.json was tuned for stop policy 1-of-1, not look:2"):
+        PinDetector("color", thresholds=pin, policy="look:2")
+
+
+REPLAYED = ["1-of-1", "2-of-3", "house:top3+0.05", "house:top1+0.1@2-of-3", "look:0", "look:4", "look:30",
+            "look:3+0.1", "look:5@2-of-3", "look:2+0@3-of-4"]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_live_decisions_equal_offline_on_replayed_walks(seed):
+    """Random walks of two squares a step (rounded scores: ties) replayed through the detector square by square,
+    with some steps' candidates unplaceable: under every policy the live ``Decision`` is the offline one on the same
+    step scores (windows that run past the walk's end included), the commit names the same steps, no map comes back
+    before the step where it commits, the agent finds something at that step, and (but under PIN's rule) nothing
+    after it."""
+    from pin_match.evaluation.core.stop import StopPolicy, one_walk
+
+    rng = np.random.default_rng(seed)
+    for text in REPLAYED:
+        policy = StopPolicy.parse(text)
+        for _ in range(4):
+            squares = np.round(rng.uniform(0.2, 1.0, (int(rng.integers(1, 60)), 2)), 2)
+            unplaceable = set(np.flatnonzero(rng.uniform(size=len(squares)) < 0.3).tolist())
+            detector = hand_detector(policy, sigma=0.7)
+            placeable = lambda step, cannot=unplaceable: step not in cannot  # the same answer, live and offline
+            detector.reset(placeable=placeable)
+            found = [any(m.any() for m in hand_step(detector, step, pair)) for step, pair in enumerate(squares)]
+            offline = policy.decide(one_walk(squares.max(axis=1)), 0.7, placeable)[0]
+            assert detector.decision == offline, (text, squares.tolist(), unplaceable)
+            if offline.stop is None:
+                assert detector.committed is None and not any(found)
+                continue
+            assert (detector.committed.step, detector.committed.at_step) == (offline.chosen, offline.stop)
+            assert not any(found[:offline.stop]) and found[offline.stop]
+            if text != "1-of-1":
+                assert not any(found[offline.stop + 1:])

@@ -7,6 +7,8 @@ import math
 
 import numpy as np
 import pytest
+from hypothesis import given
+from hypothesis import strategies as st
 from test_navigation import table_of, walk_set  # noqa: F401 (walk_set: a fixture used below)
 from test_policies import scored_episodes
 
@@ -15,11 +17,14 @@ from pin_match.evaluation.core.metrics import frame_arrays
 from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     HouseStop,
+    LookFurther,
     PolicyError,
+    RunningLevel,
     StopPolicy,
     found_frames,
     gated_scores,
     house_level,
+    one_walk,
 )
 from pin_match.evaluation.pages.stop_page import stop_html, stop_table
 
@@ -92,6 +97,38 @@ def test_policy_text_round_trips_and_bad_text_is_named():
         gated_scores(frame_arrays(scored_episodes({"e": "T"}, {"e": [0.5]})), StopPolicy(2, 3))
 
 
+NUMBERS = st.floats(min_value=0.0, allow_nan=False, allow_infinity=False)
+WINDOWS = st.tuples(st.integers(1, 9), st.integers(0, 9)).map(lambda kn: (kn[0], kn[0] + kn[1]))
+
+
+@given(top=st.integers(1, 50), margin=st.one_of(NUMBERS, NUMBERS.map(lambda x: -x)), window=WINDOWS)
+def test_the_text_of_a_house_policy_reads_back_as_the_same_policy(top, margin, window):
+    """Issue 66: house:top3+0.1234567 printed as +0.123457 and read back as another policy (the index page reads the
+    printed text back)."""
+    policy = HouseStop(*window, top=top, margin=margin)
+    assert StopPolicy.parse(str(policy)) == policy
+
+
+@given(look=st.one_of(st.none(), st.integers(0, 10_000)), clear=st.one_of(st.none(), NUMBERS), window=WINDOWS)
+def test_the_text_of_a_look_further_policy_reads_back_as_the_same_policy(look, clear, window):
+    policy = LookFurther(*window, window=look, clear=clear)
+    assert StopPolicy.parse(str(policy)) == policy
+
+
+def test_the_printed_text_keeps_every_digit():
+    assert str(StopPolicy.parse("look:20+0.1234567")) == "look:20+0.1234567"
+    assert str(HouseStop(top=3, margin=-1 / 3)) == "house:top3-0.3333333333333333"
+    assert str(StopPolicy.parse("house:top5+0@2-of-3")) == "house:top5+0@2-of-3"  # a whole number stays whole
+
+
+@pytest.mark.parametrize("text", ["look:20@0-of-3", "house:top3+0.1@4-of-3", "look:rest+0.1@0-of-2"])
+def test_a_bad_base_window_is_refused_naming_the_whole_policy(text):
+    """Issue 66: look:20@0-of-3 was refused as "stop policy 0-of-3", which is not what the user wrote."""
+    with pytest.raises(PolicyError, match="need 1 <= k <= n") as refused:
+        StopPolicy.parse(text)
+    assert str(refused.value).startswith(f"stop policy {text}")
+
+
 def test_each_episode_says_where_the_line_was_and_why():
     scored = scored_episodes({"e1": "GGCT", "e2": "OCOO"}, {"e1": [0.5, 0.5, 0.6, 0.8], "e2": [0.1, 0.7, 0.2, 0.1]})
     arr = frame_arrays(scored)
@@ -126,3 +163,33 @@ def test_the_walk_stops_where_the_house_relative_policy_fires(walk_set):  # noqa
     house = episodes_at(places, 0.4, HouseStop(top=1, margin=0.3)).iloc[0]
     assert (pin.outcome, pin.stop_step) == ("category error", 1)
     assert (house.outcome, house.stop_step, house.point_frame_id) == ("success", 4, "e_0004")
+
+
+def test_the_candidates_passed_over_are_counted_once_each():
+    """Issue 66: ``Decision.unplaced`` counted firings before the window and distinct candidates inside it. Under
+    2-of-3, steps 1 and 2 fire for the same candidate (step 1, the latest counted frame): one candidate passed over."""
+    walk = one_walk(np.array([0.9, 0.9, 0.1, 0.1, 0.1, 0.9, 0.9, 0.1]))
+    unplaceable = {1}.__contains__
+    [pin] = StopPolicy(2, 3).decide(walk, 0.5, lambda frame: not unplaceable(frame))
+    assert (pin.fired, pin.chosen, pin.unplaced) == (6, 6, 1)
+    [look] = LookFurther(2, 3, window=1).decide(walk, 0.5, lambda frame: not unplaceable(frame))
+    assert (look.fired, look.stop, look.chosen, look.unplaced) == (6, 7, 6, 1)
+    # inside the window too: 1-of-1, steps 0, 1 and 5, 6 fire; 0 opens the window of 6 frames, 1 and 5 cannot be
+    # placed, each counted once
+    [inside] = LookFurther(window=6).decide(walk, 0.5, lambda frame: frame not in (1, 5))
+    assert (inside.fired, inside.stop, inside.candidates, inside.unplaced) == (0, 6, (0, 6), 2)
+
+
+@pytest.mark.parametrize("top", [1, 3, 7, 12])
+def test_the_running_level_an_agent_keeps_equals_the_house_level(top):
+    """The live detector keeps the house's level step by step (``RunningLevel``) instead of reading the whole walk
+    at every step; ``house_level`` is the definition, and the two agree exactly on a long walk with ties."""
+    rng = np.random.default_rng(top)
+    scores = np.round(rng.uniform(size=1500), 2)  # rounded: many ties
+    running, levels = RunningLevel(top), []
+    for score in scores:
+        levels.append(running.level)
+        running.add(score)
+    expected = house_level(one_walk(scores), top)
+    assert np.array_equal(np.array(levels), expected, equal_nan=True)
+    assert np.isnan(RunningLevel(None).level)

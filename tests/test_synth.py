@@ -389,17 +389,23 @@ def test_every_approach_stops_with_its_target_large_and_passes_a_lookalike(appro
 
 
 @pytest.mark.slow
-def test_default_set_targets_large_and_alike_in_both_splits(default_synth):
-    """The default set: most episodes show their target at 2,000 px in 3 frames (generator 6 keeps targets within an
-    agent's reach, off the high shelves where they showed largest: 24 of 30); the splits' medians within 2x."""
-    from pin_match.evaluation.core.labels import frame_labels
-    from pin_match.evaluation.pages.frameset_page import LARGE_PX, target_sizes
+def test_default_set_explores_houses_as_far_as_pins_episodes(default_synth):
+    """Generator 7's default set (seed 0), measured (docs/synthetic.md, "What an episode is"): a start-to-target
+    geodesic median of 6.2 m over its 30 episodes (val alone 4.5 m; PIN's example 8.24 m), the start in another room
+    than the target in 25 of 30, one walk rendered per house; its 96-step exploration sees 22 of 30 targets at all and
+    9 at 1,000 px or more. The bars sit under those figures: a change that shortened the episodes or hid the targets
+    from the tour (the tour looks at the furniture they stand on, nearest first) would fall below them."""
+    from benchmarks.walk_stats import SEEN_PX, rooms_of, stats
 
-    sizes = target_sizes(frame_labels(default_synth))
-    assert LARGE_PX == 2000 and set(sizes.index) == {"train", "val"}
-    assert (sizes["episodes with 3 such frames"] >= 0.7 * sizes.episodes).all(), sizes.to_dict()
-    assert sizes["episodes with 3 such frames"].sum() >= 0.8 * sizes.episodes.sum(), sizes.to_dict()
-    assert sizes.p50.max() / sizes.p50.min() <= 2.0, sizes.p50.to_dict()
+    whole = stats(default_synth)
+    assert whole["houses"] == 10 and whole["rendered_per_episode"] == pytest.approx(96 / 3)
+    assert whole["geodesic_min_median_max"][1] >= 5.0, whole
+    rooms = rooms_of(default_synth)
+    assert np.mean([a != b for a, b in rooms.values()]) >= 0.6, rooms
+    target = default_synth.visibility[default_synth.visibility.role == "target"]
+    seen = target.frame_id.str.rsplit("_", n=1).str[0]
+    assert seen.nunique() >= 0.6 * len(default_synth.episodes), seen.nunique()
+    assert seen[target.pixels >= SEEN_PX].nunique() >= 0.25 * len(default_synth.episodes)
 
 
 def test_refuses_existing_output(synth):

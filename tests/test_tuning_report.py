@@ -266,3 +266,24 @@ def test_bench_passes_its_tuned_choice_in_memory_and_a_default_run_leaves_no_sta
     untuned = bench(ctx, ["color"], tmp_path, sigma=SigmaRule("default"), run=run)
     assert not path.exists() and untuned.run.tuned == {}  # an earlier run's file is not this run's
     assert load_bench(tmp_path, tiny_frameset).tuned == {}
+
+
+def test_a_thresholds_file_tuned_for_another_stop_policy_is_refused(tiny_frameset, tmp_path):
+    """Issue 64, item 1: a sigma tuned for one stop policy was read for another without a word. A file records the
+    policy it was tuned for (none: PIN's rule); reading it for another names the file and both policies."""
+    from pin_match.evaluation.core.policies import tune_policy
+    from pin_match.evaluation.core.sigma import PolicyMismatchError
+    from pin_match.evaluation.core.stop import FIRST_MATCH, LookFurther
+
+    table = make_table(tiny_frameset, tmp_path)
+    pin = write_thresholds(tune(table, tiny_frameset), tmp_path / "pin.json")
+    looked = write_thresholds(tune_policy(table, tiny_frameset, LookFurther(window=2)), tmp_path / "look.json")
+    assert load_threshold(pin, "stub").value == 0.8 and load_threshold(looked, "stub", LookFurther(window=2))
+    with pytest.raises(PolicyMismatchError, match=r"look\.json was tuned for stop policy look:2, not 1-of-1"):
+        load_threshold(looked, "stub")
+    with pytest.raises(PolicyMismatchError, match=r"pin\.json was tuned for stop policy 1-of-1, not look:2"):
+        resolve_sigma("stub@1", None, thresholds=pin, policy=LookFurther(window=2))
+    with pytest.raises(PolicyMismatchError, match="paper_thresholds.json was tuned for stop policy 1-of-1"):
+        load_threshold("paper", "dinov2", LookFurther(window=20))
+    with pytest.raises(PolicyMismatchError, match="look.json"):
+        report(table, tiny_frameset, tmp_path / "r", thresholds=looked, policy=FIRST_MATCH)

@@ -16,7 +16,7 @@ def _cmd_trade(a: argparse.Namespace) -> None:
     from pin_match.evaluation.core.metrics import Bootstrap
     from pin_match.evaluation.core.stop import StopPolicy
     from pin_match.evaluation.core.tables import markdown_table
-    from pin_match.evaluation.flows.trade import DEFAULT_WINDOWS, trade, write_trade
+    from pin_match.evaluation.flows.trade import DEFAULT_WINDOWS, default_objective, trade, write_trade
     from pin_match.scoring import score_many
 
     texts = [t.strip() for value in a.policy or [",".join(DEFAULT_WINDOWS)] for t in value.split(",") if t.strip()]
@@ -25,9 +25,13 @@ def _cmd_trade(a: argparse.Namespace) -> None:
     configs = bench_overrides(a.cfg, a.matcher)
     with engine_run(a) as run:
         tables = dict(zip(configs, score_many(ctx.fs, configs, out=a.out / "scores", run=run)))
-    rows = trade(ctx, tables, policies, objective=a.objective, tune_split=a.tune_split, read_split=a.split)
-    csv, png = write_trade(rows, a.out, f"{a.frameset}: sigma tuned ({a.objective}) on {a.tune_split} for each "
-                                        f"policy, read on {a.split}")
+    objective = a.objective or default_objective(ctx.fs)
+    rows = trade(ctx, tables, policies, objective=objective, tune_split=a.tune_split, read_split=a.split)
+    tuned = f"sigma tuned ({objective}) on {a.tune_split} for each policy, read on {a.split}"
+    csv, png = write_trade(rows, a.out, f"{a.frameset}: {tuned}")
+    missing = None if a.objective else ctx.fs.navigation_missing
+    print(tuned if missing is None else f"{tuned}; {objective}, the share of episodes committed to the target, as "
+                                        f"SR cannot be estimated: {missing}")
     print(markdown_table(rows.set_index(["matcher", "policy"]).drop(columns=["matcher_id", "upper_bound"])))
     print(f"-> {csv}\n-> {png}")
 
@@ -45,9 +49,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--policy", action="append", metavar="POLICY[,POLICY...]",
                    help="stop policies to compare (repeatable, comma-separated; default look:0,look:10,look:20,"
                         "look:40,look:rest)")
-    s.add_argument("--objective", default="sr", choices=sorted(OBJECTIVES),
-                   help="what each policy's sigma maximises on the tuning split (default sr; first-match without "
-                        "geometry)")
+    s.add_argument("--objective", choices=sorted(OBJECTIVES),
+                   help="what each policy's sigma maximises on the tuning split (default sr; on a frame-set without "
+                        "geometry first-match, the share of episodes committed to the target)")
     s.add_argument("--tune-split", default="train", help="split sigma is tuned on (default train)")
     s.add_argument("--split", default="val", help="split read (default val)")
     s.add_argument("--bootstrap", type=int, default=1000, help="bootstrap resamples for the 95 %% CIs (default 1000)")

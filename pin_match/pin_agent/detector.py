@@ -13,13 +13,25 @@ The agent hands over one square at a time. A square is one crop under both crop 
 agent shows it, and the frame's verdict (either square matched) is the agent's own max over
 its two squares.
 
-Under a stop policy other than PIN's first match (``policy="look:20"``: look 20 more steps after the
-first firing, then commit to the best candidate) the detector runs the policy itself, with the same
-code as the offline estimate (``StopPolicy.decide`` on the steps so far): a step's score is the
-best of its squares, every map is empty until the policy commits, and at the step where it does,
-``committed`` names the candidate's step, score and per-square maps (the last square's call returns
-that square's map of the candidate). The agent places the goal from the candidate's own frame: it
-keeps the depth and pose of the last ``window`` steps.
+Under a stop policy (``policy="look:20"``: look 20 more steps after the first firing, then commit
+to the best candidate) the detector runs the policy itself, with the same code as the offline
+estimate (``StopPolicy.decide`` on the steps so far, a step's score the best of its squares), so
+live and offline give the same ``Decision`` on the same scores (``detector.decision``). Every map
+is empty until the policy commits. A commit is declared at the first square after which no later
+square of the step can change it: a commit to the present step (PIN's rule, k-of-n, a
+house-relative line, a look-further window that ends on its best candidate) as soon as a square
+decides it, and from that square on each square's call returns its own map of the candidate, at
+the candidate's line; a commit to an earlier step (a window that ends on a better earlier
+candidate) after the step's last square, whose call, the only one left, returns every square's
+map of the candidate merged (its points are in another frame: the agent places them from
+``committed``). ``committed`` then names the candidate's step, score and per-square maps. After
+the commit PIN's rule goes on answering every square (its agent re-localises the goal at every
+detection); any other policy returns empty maps (its goal is the committed candidate). ``reset(placeable=...)``
+tells the detector which steps' candidates the agent can place (depth in range), as the offline
+estimate's ``placeable``; a firing whose candidate cannot is passed over. The candidate may be
+an earlier step's, so the agent places the goal from that step's depth and pose: it keeps the
+last window's steps beside the detector. A house-relative line reads the house's level, kept
+step by step (``stop.RunningLevel``), so no step reads the whole walk again for it.
 """
 
 from __future__ import annotations
@@ -38,7 +50,7 @@ from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Mat
 from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
-from pin_match.evaluation.core.stop import FIRST_MATCH, LookFurther, StopPolicy, one_walk
+from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, LookFurther, Placeable, StopPolicy, one_walk
 
 
 class PinAgentError(PinMatchError, ValueError):
@@ -48,8 +60,8 @@ class PinAgentError(PinMatchError, ValueError):
 @dataclass(frozen=True)
 class Commit:
     """The candidate a stop policy committed to: its step (0-based since ``reset``), its score (the best of its
-    squares), each square's map at sigma (in the order the agent passed them) and the step where the policy
-    committed."""
+    squares), each square's map at its line (in the order the agent passed them; a commit to the present step holds
+    the squares seen so far) and the step where the policy committed."""
 
     step: int
     score: float
@@ -63,7 +75,8 @@ class PinDetector:
     ``PinDetector("effnet", thresholds="thresholds/effnet.json")``, ``PinDetector("dino",
     thresholds="paper")`` or ``PinDetector("color", sigma=0.8)``; extra keywords are the
     matcher's config. ``sigma_choice`` says where sigma came from; ``last_result`` and
-    ``last_score`` hold the matcher's verdict on the last square, for the researcher's logs.
+    ``last_score`` hold the matcher's verdict on the last square, for the researcher's logs;
+    ``decision`` the policy's ``Decision`` on the steps so far.
     """
 
     def __init__(self, matcher: str | Matcher, *, sigma: float | None = None, thresholds: str | Path | None = None,
@@ -81,22 +94,20 @@ class PinDetector:
         if resize_dim is not None and resize_dim < 8:
             raise PinAgentError(f"resize_dim={resize_dim}: PIN resizes each square to resize_dim x resize_dim pixels")
         self.matcher = matcher
-        self.sigma_choice: SigmaChoice = resolve_sigma(matcher.id, matcher.default_sigma, sigma, thresholds)
-        if thresholds is not None:
-            _check_tuned_for(thresholds, matcher)
-        self.resize_dim = resize_dim
         self.policy = StopPolicy.parse(policy) if isinstance(policy, str) else policy
         if isinstance(self.policy, LookFurther) and self.policy.upper_bound:
             raise PinAgentError(f"stop policy {self.policy} reads where the recording ends, which an agent does not "
                                 "know: give the detector a window (look:W)")
+        self.sigma_choice: SigmaChoice = resolve_sigma(matcher.id, matcher.default_sigma, sigma, thresholds,
+                                                       self.policy)
+        if thresholds is not None:
+            _check_tuned_for(thresholds, matcher)
+        self.resize_dim = resize_dim
         if squares_per_step < 1:
             raise PinAgentError(f"squares_per_step={squares_per_step}: PIN passes 2 squares a step")
         self.squares_per_step = squares_per_step
-        self.last_result: MatchResult | None = None
-        self.committed: Commit | None = None
+        self.reset()
         self._episode_open = False
-        self._prepared = False
-        self._steps: list[list[MatchResult]] = []
 
     @classmethod
     def from_cow_config(cls, cow: Mapping[str, Any], device: Any = None) -> PinDetector:
@@ -118,16 +129,26 @@ class PinDetector:
     def last_score(self) -> float | None:
         return None if self.last_result is None else self.last_result.score
 
-    def reset(self) -> None:
-        """A new episode: the next ``forward`` prepares the matcher for its references, once."""
+    def reset(self, placeable: Placeable | None = None) -> None:
+        """A new episode: the next ``forward`` prepares the matcher for its references, once. ``placeable(step)``:
+        can the candidate of that step (0-based since this reset) be placed in the house? The agent answers from the
+        step's depth and ``candidate_maps(step)``; it may be asked again, and about the present step while its later
+        squares are still to come (points added by a later square only make a candidate placeable). None: every
+        candidate can (PIN's agent finds out itself)."""
         self._episode_open = True
         self._prepared = False
-        self.last_result = None
-        self.committed = None
-        self._steps = []
+        self._placeable = placeable
+        self.last_result: MatchResult | None = None
+        self.committed: Commit | None = None
+        self.decision: Decision | None = None
+        self._steps: list[list[tuple[MatchResult, tuple[int, int]]]] = []  # per step, each square's result and size
+        self._scores: list[float] = []  # per step, the best of its squares so far
+        self._levels: list[float] = []  # per step, the house's level before it
+        self._running = self.policy.running_level()
 
     def forward(self, obs: Any, references: Any, category: Sequence[str] | None = None) -> torch.Tensor:
-        """Map of the square ``obs`` (H x W float32, CPU): 1.0 at ``points_at(sigma)``, all zero below sigma."""
+        """Map of the square ``obs`` (H x W float32, CPU): under PIN's rule 1.0 at ``points_at(sigma)``, all zero below
+        sigma; under a policy, the candidate's map from the square where it commits (module docstring)."""
         if not self._episode_open:
             raise PinAgentError("PinDetector.forward before reset(): PIN's preprocessor resets the detector at the "
                                 "start of every episode (CowObsPreprocessor.reset)")
@@ -136,28 +157,59 @@ class PinDetector:
             self.matcher.prepare(episode_target(references, category, self.matcher))
             self._prepared = True
         self.last_result = self.matcher.match(image)
-        square_map = points_map(self.last_result.points_at(self.sigma), image.shape[0], image.shape[1])
-        if self.policy == FIRST_MATCH:
-            return square_map
-        return self._under_policy(square_map)
+        self._keep(self.last_result, image.shape[:2])
+        if self.committed is None:
+            self._decide()
+        elif self.committed.step == len(self._steps) - 1:  # the candidate's later squares join its maps
+            self.committed = self._commit(self.committed.step, self.committed.at_step)
+        return self._answer()
 
-    def _under_policy(self, square_map: torch.Tensor) -> torch.Tensor:
-        """Keep the square's result; after a step's last square, ask the policy whether it commits now."""
+    def candidate_maps(self, step: int) -> tuple[torch.Tensor, ...]:
+        """Each square's map of a step so far, at the step's line (sigma, or the policy's above it): the points a
+        goal is placed from."""
+        line = float(self.policy.line(one_walk(np.array(self._scores)), self.sigma, np.array(self._levels))[step])
+        return tuple(points_map(result.points_at(line), *shape) for result, shape in self._steps[step])
+
+    def _keep(self, result: MatchResult, shape: tuple[int, int]) -> None:
+        """The square's result joins its step (a new step after the last one's ``squares_per_step`` squares)."""
         if not self._steps or len(self._steps[-1]) == self.squares_per_step:
+            if self._scores:
+                self._running.add(self._scores[-1])  # the step before has finished
+            self._levels.append(self._running.level)
             self._steps.append([])
-        self._steps[-1].append(self.last_result)  # type: ignore[arg-type]  # set by forward
-        empty = torch.zeros_like(square_map)
-        if self.committed is not None or len(self._steps[-1]) < self.squares_per_step:
-            return empty
-        scores = np.array([max(r.score for r in step) for step in self._steps])
-        decision = self.policy.decide(one_walk(scores), self.sigma, walk_goes_on=True)[0]
-        if decision.stop is None:
-            return empty
-        chosen = self._steps[decision.chosen]  # type: ignore[index]  # a committed decision names its candidate
-        maps = tuple(points_map(r.points_at(self.sigma), *square_map.shape) for r in chosen)
-        self.committed = Commit(int(decision.chosen), float(scores[decision.chosen]), maps,  # type: ignore[arg-type]
-                                len(scores) - 1)
-        return maps[-1]
+            self._scores.append(-np.inf)
+        self._steps[-1].append((result, shape))
+        self._scores[-1] = max(self._scores[-1], result.score)
+
+    def _decide(self) -> None:
+        """The policy on the steps so far; a commit is declared once the step's later squares cannot change it: a
+        commit to the present step at once (a higher step score only counts more, its line reads earlier steps only,
+        and a candidate placeable on part of its points is placeable on all), any other at the step's last square."""
+        present = len(self._steps) - 1
+        decision = self.policy.decide(one_walk(np.array(self._scores)), self.sigma, self._placeable,
+                                      np.array(self._levels))[0]
+        complete = len(self._steps[-1]) == self.squares_per_step
+        if not complete and (decision.stop, decision.chosen) != (present, present):
+            return
+        self.decision = decision
+        if decision.stop is not None:
+            self.committed = self._commit(int(decision.chosen), present)  # type: ignore[arg-type]  # a commit's
+
+    def _commit(self, step: int, at_step: int) -> Commit:
+        return Commit(step, float(self._scores[step]), self.candidate_maps(step), at_step)
+
+    def _answer(self) -> torch.Tensor:
+        """The map this square's call returns (module docstring)."""
+        present, square = len(self._steps) - 1, len(self._steps[-1]) - 1
+        result, shape = self._steps[present][square]
+        commit = self.committed
+        if commit is not None and present == commit.step:
+            return commit.maps[square]
+        if commit is not None and present == commit.at_step:  # an earlier step's candidate: the one call left
+            return torch.stack(commit.maps).amax(dim=0)
+        if commit is not None and self.policy == FIRST_MATCH:
+            return points_map(result.points_at(self.sigma), *shape)
+        return torch.zeros(shape, dtype=torch.float32)
 
     __call__ = forward  # PIN calls its detector as a module: self.clip_module(square, references, category=...)
 

@@ -3,9 +3,10 @@ long it looked, and PIN's metrics read through it (``policy_metrics``).
 
 Where a frame-set has no geometry (real photos) there is no walk to follow, but the policy still
 decides which frame the agent would commit to (``StopPolicy.decide``, every candidate placeable).
-The share of episodes committed to the target, to a look-alike or to something else, and the
-frames looked at before committing, are then what a look-further policy buys and costs; with
-geometry they stand beside the navigation estimate, which reads the same decisions.
+The share of episodes committed to the target, to a look-alike or to something else, the share
+still looking when the walk ended (a window that ran past its last frame), and the frames looked
+at before committing, are then what a look-further policy buys and costs; with geometry they
+stand beside the navigation estimate, which reads the same decisions.
 """
 
 from __future__ import annotations
@@ -30,18 +31,21 @@ from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, episode_boun
 
 COMMIT_COLUMNS = ["episode_id", "committed_step", "committed_class", "committed_score", "fired_step", "commit_step",
                   "looked_frames", "candidates"]
-COMMIT_KEYS = ("commit_target_pct", "commit_lookalike_pct", "commit_other_pct", "commit_none_pct", "frames_looked_at")
+COMMIT_KEYS = ("commit_target_pct", "commit_lookalike_pct", "commit_other_pct", "commit_none_pct", "still_looking_pct",
+               "frames_looked_at")
 
 
 def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFrame:
     """One row per episode (``COMMIT_COLUMNS``): the frame committed to (0-based step, class TM / CM / GM / OM,
     score), the firing that opened the window, the frame where the agent committed, the frames it had looked at by
-    then (1-based) and how many candidates it weighed; None where it never commits."""
+    then (1-based) and how many candidates it weighed; None where it never commits. An episode still looking when
+    the walk ended has its firing and candidates but no commit; it looked at its whole walk."""
     rows = []
     for (start, end), d in zip(episode_bounds(arr), policy.decide(arr, sigma)):
         episode_id = str(arr.episode_ids[arr.episode[start]])
         if d.chosen is None:
-            rows.append(dict(episode_id=episode_id, looked_frames=end - start, candidates=0))
+            rows.append(dict(episode_id=episode_id, fired_step=None if d.fired is None else d.fired - start,
+                             looked_frames=end - start, candidates=len(d.candidates)))
             continue
         fired, stop = int(d.fired), int(d.stop)  # type: ignore[arg-type]  # a committed decision has both
         rows.append(dict(episode_id=episode_id, committed_step=d.chosen - start,
@@ -53,20 +57,22 @@ def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFr
 
 
 def commit_shares(rows: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
-    """% of episodes committed to the target, to a look-alike, to anything else, to nothing; the mean frames looked
-    at (every episode: one that never commits looked at its whole walk), each episode counted ``weights`` times."""
+    """% of episodes committed to the target, to a look-alike, to anything else, to nothing (it never fired on a
+    placeable candidate), still looking (its window was open when the walk ended; the five add up to 100); the mean
+    frames looked at (every episode: one that never commits looked at its whole walk), each episode counted
+    ``weights`` times."""
     w = np.ones(len(rows)) if weights is None else np.asarray(weights, np.float64)
     total = w.sum()
     if not total:
         return {key: math.nan for key in COMMIT_KEYS}
-    cls = rows["committed_class"]
+    cls, opened = rows["committed_class"], rows["fired_step"].notna()
 
     def share(mask: pd.Series) -> float:
         return float(100 * np.dot(w, mask.to_numpy(np.float64)) / total)
 
     return dict(commit_target_pct=share(cls == CLASSES[TM]), commit_lookalike_pct=share(cls == CLASSES[CM]),
                 commit_other_pct=share(cls.notna() & ~cls.isin([CLASSES[TM], CLASSES[CM]])),
-                commit_none_pct=share(cls.isna()),
+                commit_none_pct=share(cls.isna() & ~opened), still_looking_pct=share(cls.isna() & opened),
                 frames_looked_at=float(np.dot(w, rows["looked_frames"].to_numpy(np.float64)) / total))
 
 
@@ -82,7 +88,7 @@ def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATC
     ``frames_to_first_match``: the mean, over episodes where something is found, of the 1-based position of the
     first found frame (for a look-further policy, the frame it commits to), NaN where nothing is found;
     ``frames_looked_at``: ``commit_shares``' (the 1-based frame where the agent committed, the whole walk where it
-    never does).
+    never does). ``look:0`` gives PIN's rule exactly (``LookFurther.found``).
     """
     arr = as_arrays(scored)
     found = found_frames(arr, sigma, policy)

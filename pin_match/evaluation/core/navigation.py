@@ -13,9 +13,10 @@ as PIN measures it (the Euclidean distance from the agent's position to the targ
 within PIN's success distance of the target; category error within it of a same-category
 look-alike instead; D2G its distance to the target; Steps the actions walked to the stop frame,
 the turns and forward steps to the standing point, and the stop; SPL success x geodesic /
-max(path, geodesic). A walk on which the policy never fires on a placeable frame is "not found":
-a failure, D2G from where the agent stands at the walk's end, Steps the walk's. Assumptions and
-the paper's definitions: docs/metrics.md, "Navigation".
+max(path, geodesic). A walk on which the policy never commits is "not found": it never fired on
+a placeable frame, or its window was still open when the walk ended (still looking: its
+``fired_step`` is set); a failure, D2G from where the agent stands at the walk's end, Steps the
+walk's. Assumptions and the paper's definitions: docs/metrics.md, "Navigation".
 
 Pure functions of a score table, its frame-set (geometry, depth, masks) and a stop policy;
 ``Placements`` reads each frame's depth at its points once and serves every sigma.
@@ -47,7 +48,7 @@ NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
                    "landed_on", "point_x", "point_y", "point_z", "stand_x", "stand_y", "d2g", "path", "geodesic", "spl",
-                   "steps", "unplaced_firings", "fired_step", "candidates"]
+                   "steps", "unplaced_candidates", "fired_step", "candidates"]
 
 
 class NavigationError(PinMatchError, ValueError):
@@ -171,7 +172,9 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
                 stand_x=float(position[0]), stand_y=float(position[1]),
                 d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]),
                 geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]),
-                unplaced_firings=decision.unplaced, fired_step=None, candidates=0)
+                unplaced_candidates=decision.unplaced,
+                fired_step=None if decision.fired is None else int(places.steps[decision.fired]),
+                candidates=len(decision.candidates))
 
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
@@ -201,7 +204,8 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
                 point_frame_id=str(places.frame_ids[source]), landed_on=landed_on, point_x=float(point[0]),
                 point_y=float(point[1]), point_z=float(point[2]), stand_x=float(stand[0]), stand_y=float(stand[1]),
                 d2g=d2g, path=path, geodesic=geodesic, spl=spl,
-                steps=steps, unplaced_firings=decision.unplaced, fired_step=int(places.steps[int(decision.fired)]),
+                steps=steps, unplaced_candidates=decision.unplaced,
+                fired_step=int(places.steps[int(decision.fired)]),
                 candidates=len(decision.candidates))
 
 
@@ -221,8 +225,8 @@ def standing_point(geometry: EpisodeGeometry, goal: np.ndarray, eye_xy: np.ndarr
 
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
-    """SR, SPL, CE (% of episodes), D2G (metres), Steps, and the shares not found and with an unplaced firing, each
-    episode counted ``weights`` times (None: once)."""
+    """SR, SPL, CE (% of episodes), D2G (metres), Steps, and the shares not found and with an unplaced candidate,
+    each episode counted ``weights`` times (None: once)."""
     w = np.ones(len(episodes)) if weights is None else np.asarray(weights, np.float64)
     total = w.sum()
     if not total:
@@ -235,7 +239,7 @@ def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dic
     return dict(sr=100 * mean(outcome == "success"), spl=100 * mean(episodes["spl"]),
                 ce=100 * mean(outcome == "category error"), d2g=mean(episodes["d2g"]), steps=mean(episodes["steps"]),
                 not_found_pct=100 * mean(outcome == "not found"),
-                unplaced_pct=100 * mean(episodes["unplaced_firings"] > 0))
+                unplaced_pct=100 * mean(episodes["unplaced_candidates"] > 0))
 
 
 def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,

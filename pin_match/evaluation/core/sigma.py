@@ -4,6 +4,8 @@ Every command that thresholds (``report``, ``bench``, ``demo``) goes through ``r
 and carries the returned ``SigmaChoice`` into what it prints and writes, so no table or
 caption can claim "tuned on train" for a sigma that was not. Thresholds files are read
 here too: a tuned file (``pin-match tune``) or a table of several (``paper_thresholds.json``, package data).
+A file records the stop policy its sigma was tuned for (none: PIN's rule); read for another
+policy it is refused (``PolicyMismatchError``): its sigma is not that policy's.
 """
 
 from __future__ import annotations
@@ -15,6 +17,7 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.errors import PinMatchError
+from pin_match.evaluation.core.stop import FIRST_MATCH, PolicyError, StopPolicy
 
 # the paper's sigmas ship inside the package (package data), so ``--thresholds paper`` works from any install
 PAPER_THRESHOLDS = Path(__file__).resolve().with_name("paper_thresholds.json")
@@ -22,6 +25,10 @@ PAPER_THRESHOLDS = Path(__file__).resolve().with_name("paper_thresholds.json")
 
 class SigmaError(PinMatchError, ValueError):
     """No sigma can be given to a matcher from what was asked for."""
+
+
+class PolicyMismatchError(SigmaError):
+    """A thresholds file tuned for one stop policy, read for another."""
 
 
 @dataclass(frozen=True)
@@ -46,8 +53,9 @@ def way_out(matcher_id: str, split: str, available: list[str]) -> str:
 
 
 def resolve_sigma(matcher_id: str, default_sigma: float | None, sigma: float | None = None,
-                  thresholds: str | Path | None = None) -> SigmaChoice:
-    """Explicit sigma, else a thresholds file (``"paper"`` = the paper's), else the matcher's default."""
+                  thresholds: str | Path | None = None, policy: StopPolicy = FIRST_MATCH) -> SigmaChoice:
+    """Explicit sigma, else a thresholds file (``"paper"`` = the paper's) tuned for ``policy``, else the matcher's
+    default."""
     if sigma is not None and thresholds is not None:
         raise SigmaError("give either a threshold or a thresholds file, not both")
     if sigma is not None:
@@ -55,7 +63,7 @@ def resolve_sigma(matcher_id: str, default_sigma: float | None, sigma: float | N
             raise SigmaError(f"threshold {sigma!r} is not a finite number")
         return SigmaChoice(float(sigma), "given", "given on the command line / as an argument")
     if thresholds is not None:
-        return load_threshold(thresholds, matcher_id)
+        return load_threshold(thresholds, matcher_id, policy)
     if default_sigma is not None:
         return SigmaChoice(float(default_sigma), "matcher default", f"{matcher_id.split('@')[0]}'s default sigma")
     raise SigmaError(f"{matcher_id} has no default sigma: pass --threshold SIGMA or --thresholds FILE")
@@ -70,8 +78,9 @@ def thresholds_path(thresholds: str | Path) -> Path:
     return Path(thresholds)
 
 
-def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
-    """Sigma for a matcher from a tuned file (``{"matcher", "sigma", ...}``) or a table of several.
+def load_threshold(thresholds: str | Path, matcher_name: str, policy: StopPolicy = FIRST_MATCH) -> SigmaChoice:
+    """Sigma for a matcher under stop policy ``policy`` from a tuned file (``{"matcher", "sigma", ...}``) or a table of
+    several; a file tuned for another policy is refused (``PolicyMismatchError``).
 
     The table form is ``paper_thresholds.json``, package data: ``{"source": ..., "thresholds": {name: {"sigma": x}}}``
     (an optional ``label`` is the sigma's source in a table cell, as the demo's shipped sigmas say where they come
@@ -83,6 +92,7 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
         raise SigmaError(f"no thresholds file {path}: run `pin-match tune` first (it writes it), pass --threshold "
                          "SIGMA, or --thresholds paper")
     data = atomic.read_json(path, SigmaError, "thresholds file")
+    _check_policy(data, path, policy)
     names = {matcher_name, matcher_name.split("@")[0]}
     if isinstance(data, dict) and "sigma" in data:
         if data.get("matcher") not in names and data.get("matcher_id") not in names:
@@ -103,6 +113,18 @@ def load_threshold(thresholds: str | Path, matcher_name: str) -> SigmaChoice:
         raise SigmaError(f"{path} has no threshold for {matcher_name!r}; it covers only {', '.join(covered)}. "
                          f"Tune {matcher_name.split('@')[0]} (pin-match tune) or pass --threshold SIGMA")
     raise SigmaError(f"{path} is neither a tuned thresholds file nor a {{'thresholds': {{...}}}} table")
+
+
+def _check_policy(data: object, path: Path, policy: StopPolicy) -> None:
+    """A sigma tuned for one stop policy is not another's: a file that records another (none: PIN's rule) is refused."""
+    text = data.get("policy", str(FIRST_MATCH)) if isinstance(data, dict) else str(FIRST_MATCH)
+    try:
+        tuned_for = StopPolicy.parse(str(text))
+    except PolicyError as exc:
+        raise SigmaError(f"{path}: {exc}") from None
+    if tuned_for != policy:
+        raise PolicyMismatchError(f"{path} was tuned for stop policy {tuned_for}, not {policy}: tune for it "
+                                  f"(pin-match tune --policy '{policy}') or give the sigma")
 
 
 def tuned_choice(result: dict, where: str) -> SigmaChoice:

@@ -14,14 +14,18 @@ separates them across houses.
 ``decide`` is what every policy answers, per episode: where the window opened, where the agent
 stopped looking, which frame it committed to and the candidates it weighed (``Decision``), given
 which candidates can be placed in the house (the navigation estimate says; without geometry every
-one can). ``found_frames`` (the frames where the policy fires, or for a look-further policy the one
-frame it commits to) is what PIN's metrics read (``policy_metrics``, ``carry``); ``navigation``
+one can). A window that reaches past the last frame has not closed: the agent is still looking
+when the recording ends, as it would be live (``PinDetector`` runs the same ``decide`` on the walk
+so far). Only ``look:rest``, the upper bound, reads where the recording ends. ``found_frames``
+(the frames where the policy fires; for a look-further policy the frame it commits to and every
+firing after the commit) is what PIN's metrics read (``policy_metrics``, ``carry``); ``navigation``
 reads the decisions; ``episode_stops`` says per episode where the line was and why.
 Definitions: docs/metrics.md, "Stop policies".
 """
 
 from __future__ import annotations
 
+import bisect
 import math
 import re
 from collections.abc import Callable
@@ -38,7 +42,8 @@ class PolicyError(PinMatchError, ValueError):
 
 
 POLICY_SYNTAX = ("K-of-N (e.g. 2-of-3), house:topT+MARGIN (e.g. house:top3+0.1) or look:W[+CLEAR] / look:rest "
-                 "(e.g. look:20, look:20+0.1)")
+                 "(e.g. look:20, look:20+0.1; look:rest is the upper bound)")
+UPPER_BOUND = " (upper bound)"  # the text of a policy that reads where the recording ends says so wherever it is shown
 
 Placeable = Callable[[int], bool]  # can the candidate of this frame (an index into the arrays) be placed?
 
@@ -49,7 +54,9 @@ class Decision:
     whose candidate could be placed, where the agent starts weighing candidates; ``stop``: the frame where it stops
     looking and commits (``fired`` itself for every policy but a look-further one); ``chosen``: the frame whose
     candidate it commits to (the latest counted frame of the firing window); ``candidates``: every candidate frame
-    it weighed, in walk order; ``unplaced``: firings passed over because their candidate could not be placed."""
+    it weighed, in walk order; ``unplaced``: the distinct candidates passed over because they could not be placed,
+    before the window and inside it (several firings may stand for one candidate: it is counted once). ``fired`` set
+    with ``stop`` None: the window was still open when the walk ended (the agent is still looking)."""
 
     fired: int | None
     stop: int | None
@@ -67,7 +74,7 @@ class StopPolicy:
 
     def __post_init__(self) -> None:
         if not 1 <= self.k <= self.n:
-            raise PolicyError(f"stop policy {self.k}-of-{self.n}: need 1 <= k <= n")
+            raise PolicyError(f"stop policy {self}: need 1 <= k <= n")
 
     def __str__(self) -> str:
         return f"{self.k}-of-{self.n}"
@@ -88,13 +95,19 @@ class StopPolicy:
         """Per frame, the house's level the policy reads (NaN: none, as for PIN's rule)."""
         return np.full(len(arr.score), np.nan)
 
-    def bar(self, arr: FrameArrays) -> np.ndarray:
-        """Per frame, the score it must reach whatever sigma is (none here: -inf); its line is the higher of the two."""
-        return np.full(len(arr.score), -np.inf)
+    def running_level(self) -> RunningLevel:
+        """The house's level kept step by step, for an agent that meets its walk one step at a time."""
+        return RunningLevel(None)
 
-    def line(self, arr: FrameArrays, sigma: float) -> np.ndarray:
-        """Per frame, the score it must reach to count: the higher of sigma and the policy's bar."""
-        return np.maximum(sigma, self.bar(arr))
+    def bar(self, level: np.ndarray) -> np.ndarray:
+        """Per frame, from its house's level (``level``), the score it must reach whatever sigma is (none here:
+        -inf); its line is the higher of the two."""
+        return np.full(len(level), -np.inf)
+
+    def line(self, arr: FrameArrays, sigma: float, level: np.ndarray | None = None) -> np.ndarray:
+        """Per frame, the score it must reach to count: the higher of sigma and the policy's bar. ``level``: the house's
+        level per frame where the caller keeps it already (an agent, step by step); None: ``self.level(arr)``."""
+        return np.maximum(sigma, self.bar(self.level(arr) if level is None else level))
 
     def counted(self, arr: FrameArrays, sigma: float) -> np.ndarray:
         """Per frame: is its score at or above its line?"""
@@ -102,12 +115,16 @@ class StopPolicy:
 
     def fires(self, arr: FrameArrays, sigma: float) -> np.ndarray:
         """Per frame: do at least ``k`` of the last ``n`` frames of its episode count?"""
-        counted = np.r_[0, np.cumsum(self.counted(arr, sigma))]
+        return self._window_fires(arr, self.counted(arr, sigma))
+
+    def _window_fires(self, arr: FrameArrays, counted: np.ndarray) -> np.ndarray:
+        """Per frame, from the frames that count: do at least ``k`` of the last ``n`` frames of its episode?"""
+        total = np.r_[0, np.cumsum(counted)]
         index = np.arange(len(arr.score))
         starts = episode_starts(arr)
         episode_start = starts[np.searchsorted(starts, index, side="right") - 1] if len(index) else index
         window_start = np.maximum(index - self.n + 1, episode_start)
-        return counted[index + 1] - counted[window_start] >= self.k
+        return total[index + 1] - total[window_start] >= self.k
 
     @property
     def one_sweep(self) -> bool:
@@ -119,27 +136,30 @@ class StopPolicy:
         return self.fires(arr, sigma)
 
     def decide(self, arr: FrameArrays, sigma: float, placeable: Placeable | None = None,
-               walk_goes_on: bool = False) -> list[Decision]:
+               level: np.ndarray | None = None) -> list[Decision]:
         """One ``Decision`` per episode (in ``arr``'s order). ``placeable(i)``: can frame i's candidate be placed in
         the house (None: every one can, as without geometry)? A firing whose candidate cannot is passed over.
-        ``walk_goes_on``: the frames are the walk so far (an agent deciding live), so a window that reaches past the
-        last frame is still open: no commit yet (``stop`` and ``chosen`` None, ``fired`` set)."""
-        fired = self.fires(arr, sigma)
-        source = latest_counted(arr, self.counted(arr, sigma))
-        return [self._decide(arr.score, fired, source, (start, end), placeable, walk_goes_on)
-                for start, end in episode_bounds(arr)]
+        ``level``: as for ``line``. The frames may be a whole recording or an agent's walk so far: the decision
+        reads nothing after the frame where it commits, and a window that reaches past the last frame is still open
+        (no commit, ``fired`` set)."""
+        counted = arr.score >= self.line(arr, sigma, level)
+        fired = self._window_fires(arr, counted)
+        source = latest_counted(arr, counted)
+        return [self._decide(arr.score, fired, source, (start, end), placeable) for start, end in episode_bounds(arr)]
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
-                placeable: Placeable | None, walk_goes_on: bool) -> Decision:
+                placeable: Placeable | None) -> Decision:
         """The first firing of frames ``start:end`` whose candidate can be placed; the agent commits there."""
         start, end = bounds
-        unplaced = 0
+        passed, last_passed = 0, -1
         for t in np.flatnonzero(fired[start:end]) + start:
             candidate = int(source[t])
+            if candidate == last_passed:  # this firing stands for the candidate just passed over
+                continue
             if placeable is None or placeable(candidate):
-                return Decision(int(t), int(t), candidate, (candidate,), unplaced)
-            unplaced += 1
-        return Decision(None, None, None, (), unplaced)
+                return Decision(int(t), int(t), candidate, (candidate,), passed)
+            passed, last_passed = passed + 1, candidate
+        return Decision(None, None, None, (), passed)
 
 
 @dataclass(frozen=True)
@@ -158,7 +178,7 @@ class HouseStop(StopPolicy):
             raise PolicyError(f"stop policy {self}: need top >= 1 and a finite margin")
 
     def __str__(self) -> str:
-        return f"house:top{self.top}{self.margin:+g}{_base_suffix(self)}"
+        return f"house:top{self.top}{_signed(self.margin)}{_base_suffix(self)}"
 
     @classmethod
     def parse(cls, text: str) -> HouseStop:
@@ -172,18 +192,24 @@ class HouseStop(StopPolicy):
     def level(self, arr: FrameArrays) -> np.ndarray:
         return house_level(arr, self.top)
 
-    def bar(self, arr: FrameArrays) -> np.ndarray:
-        return np.nan_to_num(self.level(arr), nan=-np.inf) + self.margin
+    def running_level(self) -> RunningLevel:
+        return RunningLevel(self.top)
+
+    def bar(self, level: np.ndarray) -> np.ndarray:
+        return np.nan_to_num(level, nan=-np.inf) + self.margin
 
 
 @dataclass(frozen=True)
 class LookFurther(StopPolicy):
     """Look before committing: after the first firing (a frame that fires and whose candidate can be placed) the
-    agent walks on for ``window`` more frames of its walk (None: to the walk's end, an upper bound that knows where
-    the recording stops), remembers each candidate it sees (a firing frame's, placeable), and commits to the
-    highest-scoring one (the first among equals) at the window's last frame, then walks back to it. With ``clear``
-    it commits at once to a candidate that beats every earlier frame of the episode by ``clear`` (the window's first
-    candidate included). Nothing after the frame where it commits is read. ``window=0`` is the base rule."""
+    agent walks on for ``window`` more frames of its walk, remembers each candidate it sees (a firing frame's,
+    placeable), and commits to the highest-scoring one (the first among equals) at the window's last frame, then
+    walks back to it. A window that reaches past the walk's last frame has not closed there: the agent is still
+    looking when the walk ends and commits to nothing, as it would live. ``window=None`` (``look:rest``) looks to the
+    walk's end and commits there: it knows where the recording stops, which no agent does, so it is the upper bound
+    and its text says so (``UPPER_BOUND``). With ``clear`` it commits at once to a candidate that beats every earlier
+    frame of the episode by ``clear`` (the window's first candidate included). Nothing after the frame where it
+    commits is read. ``window=0`` is the base rule."""
 
     window: int | None = field(default=20, kw_only=True)
     clear: float | None = field(default=None, kw_only=True)
@@ -197,17 +223,18 @@ class LookFurther(StopPolicy):
 
     def __str__(self) -> str:
         window = "rest" if self.window is None else str(self.window)
-        clear = "" if self.clear is None else f"+{self.clear:g}"
-        return f"look:{window}{clear}{_base_suffix(self)}"
+        clear = "" if self.clear is None else _signed(abs(self.clear))  # -0.0 is 0.0: the text has no minus
+        return f"look:{window}{clear}{_base_suffix(self)}{UPPER_BOUND if self.upper_bound else ''}"
 
     @classmethod
     def parse(cls, text: str) -> LookFurther:
-        found = re.fullmatch(r"\s*look:(\d+|rest)(?:\+(\d*\.?\d+(?:e[+-]?\d+)?))?(?:@(\d+)-of-(\d+))?\s*", text)
-        if not found:
+        found = re.fullmatch(r"\s*look:(\d+|rest)(?:\+(\d*\.?\d+(?:e[+-]?\d+)?))?(?:@(\d+)-of-(\d+))?"
+                             rf"({re.escape(UPPER_BOUND)})?\s*", text)
+        if not found or (found.group(5) and found.group(1) != "rest"):
             raise PolicyError(f"stop policy {text!r}: write a look-further one as look:W (W more frames after the "
                               "first firing, e.g. look:20), look:W+CLEAR (commit at once to a candidate that beats "
-                              "every earlier frame by CLEAR, e.g. look:20+0.1) or look:rest (the whole walk, an upper "
-                              "bound); optionally @K-of-N")
+                              "every earlier frame by CLEAR, e.g. look:20+0.1) or look:rest (the whole walk, the "
+                              "upper bound); optionally @K-of-N")
         k, n = _base_window(found, 3)
         window = None if found.group(1) == "rest" else int(found.group(1))
         return cls(k, n, window=window, clear=None if found.group(2) is None else float(found.group(2)))
@@ -222,37 +249,55 @@ class LookFurther(StopPolicy):
         return False
 
     def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
-        """The one frame per episode it commits to."""
+        """The frame it commits to and, as PIN's rule counts every frame where it fires, every firing after the frame
+        where it committed (the candidates it passed over are not found): ``window=0`` is the base rule exactly."""
+        fires = self.fires(arr, sigma)
         mask = np.zeros(len(arr.score), bool)
-        mask[[d.chosen for d in self.decide(arr, sigma) if d.chosen is not None]] = True
+        for (_, end), d in zip(episode_bounds(arr), self.decide(arr, sigma)):
+            if d.chosen is not None:
+                mask[d.chosen] = True
+                mask[d.stop + 1:end] = fires[d.stop + 1:end]  # type: ignore[operator]  # a commit has a stop
         return mask
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
-                placeable: Placeable | None, walk_goes_on: bool) -> Decision:
-        first = super()._decide(scores, fired, source, bounds, placeable, walk_goes_on)
+                placeable: Placeable | None) -> Decision:
+        first = super()._decide(scores, fired, source, bounds, placeable)
         if first.fired is None:
             return first
         start, end = bounds
-        last = end - 1 if self.window is None else min(first.fired + self.window, end - 1)
-        firings = np.flatnonzero(fired[first.fired:last + 1]) + first.fired
-        seen = source[firings]  # non-decreasing: a candidate several firings stand for is one run
-        new = np.ones(len(seen), bool)
-        new[1:] = seen[1:] != seen[:-1]
-        firings, seen = firings[new], seen[new]
-        unplaced = first.unplaced
-        if placeable is not None:
-            keep = np.array([placeable(int(c)) for c in seen])  # the window's first candidate is placeable
-            unplaced += int((~keep).sum())
-            firings, seen = firings[keep], seen[keep]
+        last = end - 1 if self.window is None else first.fired + self.window
+        firings, seen, kept = _window_candidates(fired, source, (first.fired, min(last, end - 1)), placeable)
         if self.clear is not None:
             before = np.r_[-np.inf, np.maximum.accumulate(scores[start:end])[:-1]]  # best of the earlier frames
-            cleared = np.flatnonzero(scores[seen] >= before[seen - start] + self.clear)
+            cleared = np.flatnonzero(kept & (scores[seen] >= before[seen - start] + self.clear))
             if cleared.size:  # it beats every earlier frame, so every earlier candidate: the best so far
                 k = int(cleared[0])
-                return Decision(first.fired, int(firings[k]), int(seen[k]), _ints(seen[:k + 1]), unplaced)
-        if walk_goes_on and (self.window is None or first.fired + self.window > end - 1):
-            return Decision(first.fired, None, None, _ints(seen), unplaced)
-        return Decision(first.fired, last, int(seen[np.argmax(scores[seen])]), _ints(seen), unplaced)
+                return Decision(first.fired, int(firings[k]), int(seen[k]), _ints(seen[:k + 1][kept[:k + 1]]),
+                                first.unplaced + int((~kept[:k]).sum()))
+        unplaced = first.unplaced + int((~kept).sum())
+        if last > end - 1:  # the window reaches past the walk's last frame: still looking when the walk ends
+            return Decision(first.fired, None, None, _ints(seen[kept]), unplaced)
+        return Decision(first.fired, last, int(seen[kept][np.argmax(scores[seen[kept]])]), _ints(seen[kept]), unplaced)
+
+
+def _window_candidates(fired: np.ndarray, source: np.ndarray, window: tuple[int, int],
+                       placeable: Placeable | None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The firings of frames ``window`` (first, last; both included) that each bring a new candidate, those
+    candidates in walk order, and whether each can be placed (the window's first one can: it opened the window)."""
+    firings = np.flatnonzero(fired[window[0]:window[1] + 1]) + window[0]
+    seen = source[firings]  # non-decreasing: a candidate several firings stand for is one run
+    new = np.ones(len(seen), bool)
+    new[1:] = seen[1:] != seen[:-1]
+    firings, seen = firings[new], seen[new]
+    kept = np.array([placeable is None or placeable(int(c)) for c in seen], bool)
+    return firings, seen, kept
+
+
+def _signed(value: float) -> str:
+    """A number as a policy's text writes it: its sign, then the shortest text that reads back as the same float
+    (``repr``, a whole number without its ".0"), so ``parse(str(policy)) == policy`` for every value."""
+    text = repr(float(value)).removesuffix(".0")
+    return text if text.startswith("-") else f"+{text}"
 
 
 def _base_suffix(policy: StopPolicy) -> str:
@@ -280,7 +325,8 @@ def one_walk(scores: np.ndarray) -> FrameArrays:
 def describe(policy: StopPolicy) -> str:
     """The policy in a phrase a page or a table caption can say."""
     if isinstance(policy, LookFurther):
-        window = "to the walk's end (an upper bound)" if policy.upper_bound else f"{policy.window} more frames"
+        window = "to the walk's end, which no agent knows" if policy.upper_bound else \
+            f"{policy.window} more frames (a window that runs past the walk's end leaves it still looking)"
         clear = "" if policy.clear is None else f", committing at once to one that beats every earlier frame by " \
             f"{policy.clear:g}"
         base = "PIN's first match" if (policy.k, policy.n) == (1, 1) else f"{policy.k} of {policy.n} frames"
@@ -327,9 +373,38 @@ def house_level(arr: FrameArrays, top: int) -> np.ndarray:
         earlier = np.where(np.tri(length, k=-1, dtype=bool), scores[None, :], -np.inf)  # row t: frames before t
         best = -np.sort(-earlier, axis=1)[:, :top]
         count = np.minimum(np.arange(length), top)
-        total = np.where(np.isfinite(best), best, 0.0).sum(axis=1)
+        total = np.zeros(length)
+        for column in np.where(np.isfinite(best), best, 0.0).T:  # summed highest first, as ``RunningLevel`` sums
+            total = total + column
         level[start:end] = np.where(count > 0, total / np.maximum(count, 1), np.nan)
     return level
+
+
+class RunningLevel:
+    """``house_level`` of one walk as an agent meets it, a step at a time: it keeps the ``top`` highest scores of the
+    finished steps (None: no house level, NaN throughout), so a step costs O(top) instead of reading the whole walk
+    again. ``house_level`` stays the definition: this sums the same scores in the same order, and a test holds the
+    two equal on long random walks."""
+
+    def __init__(self, top: int | None) -> None:
+        self.top = top
+        self._best: list[float] = []  # the highest scores of the finished steps, highest first
+
+    def add(self, score: float) -> None:
+        """A step has finished with this score: the steps after it read it."""
+        if self.top is not None:
+            bisect.insort(self._best, float(score), key=lambda x: -x)
+            del self._best[self.top:]
+
+    @property
+    def level(self) -> float:
+        """The level of the next step: the mean of the kept scores (NaN before any step has finished)."""
+        if not self._best:
+            return math.nan
+        total = 0.0
+        for score in self._best:
+            total = total + score
+        return total / len(self._best)
 
 
 def found_frames(arr: FrameArrays, sigma: float, policy: StopPolicy) -> np.ndarray:
@@ -350,7 +425,7 @@ def gated_scores(arr: FrameArrays, policy: StopPolicy) -> np.ndarray:
     if not policy.one_sweep:
         what = "a look-further policy" if isinstance(policy, LookFurther) else f"a window of {policy.n} frames"
         raise PolicyError(f"stop policy {policy}: {what} is not one gated score a frame")
-    return np.where(arr.score >= policy.bar(arr), arr.score, -np.inf)
+    return np.where(arr.score >= policy.bar(policy.level(arr)), arr.score, -np.inf)
 
 
 FIRST_MATCH = StopPolicy()  # PIN's own rule (1-of-1), the default of every ``policy=`` parameter

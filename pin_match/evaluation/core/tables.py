@@ -25,9 +25,10 @@ TABLE_COLUMNS = [("match_pct", "%Match", 2), ("tm_pct", "TM", 2), ("cm_pct", "CM
 NAVIGATION_COLUMNS = [("sr", "SR", 2), ("spl", "SPL", 2), ("ce", "CE", 2), ("d2g", "D2G", 2), ("steps", "Steps", 1),
                       ("not_found_pct", "Not found", 2)]
 # what a stop policy other than PIN's rule committed to (``commits``): % of episodes committed to the target and to a
-# look-alike, and the frames looked at before committing; only where a row has them
+# look-alike, % still looking when the walk ended, and the frames looked at before committing; only where a row has
+# them
 COMMIT_COLUMNS = [("commit_target_pct", "Commit T", 2), ("commit_lookalike_pct", "Commit C", 2),
-                  ("frames_looked_at", "Looked", 1)]
+                  ("still_looking_pct", "Still looking", 2), ("frames_looked_at", "Looked", 1)]
 CATEGORY_COLUMNS = [("n_episodes", "Episodes", 0), *TABLE_COLUMNS]
 ALL_COLUMNS = [*NAVIGATION_COLUMNS, *COMMIT_COLUMNS, *CATEGORY_COLUMNS]
 SIGMA_FROM = "sigma from"

