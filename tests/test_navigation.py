@@ -157,7 +157,25 @@ def test_a_goal_on_a_high_shelf_is_out_of_reach_from_the_floor(walk_set):
     assert with_map.outcome == "other stop" and with_map.d2g == pytest.approx(math.dist((2.95, -0.43, 0.0), high))
     low = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], geometry=dict(floor_map=shelf))  # the target at 0.5 m
     assert low.outcome == "success" and low.d2g == pytest.approx(math.dist((2.95, -0.43, 0.0), TARGET))
-    assert low.steps == 4 + 0 + math.ceil(math.hypot(2.95, -0.43) / 0.25) + 1
+    # on the map's cells: from (0, 0) to its nearest cell's centre (-0.05, -0.03), then 30 cells along x and 4 along y
+    # to the cell (2.95, -0.43): 26 straight and 4 diagonal, below the shelf
+    walked = math.hypot(0.05, 0.03) + 26 * 0.1 + 4 * 0.1 * math.sqrt(2)
+    assert low.path == pytest.approx(3.0 + walked)
+    assert low.steps == 4 + 0 + math.ceil(walked / 0.25) + 1 == 4 + 13 + 1
+
+
+def test_after_a_commit_the_agent_walks_around_a_wall_not_through_it(walk_set):
+    """A wall between the agent (at x = 0 when it matches) and the target (x = 3), open above y = 1: the walk to the
+    standing point goes through the opening, and its length is the path's and the Steps'."""
+    house = FloorMap(np.ones((100, 40), bool), 0.1, (-5.0, -1.98))
+    house.free[65:67, :30] = False  # x 1.5-1.7, y -1.98 to 1.02: a wall with its opening at the top
+    stop = stop_of(walk_set, [0.0, 0.0, 0.0, 0.0, 0.9, 0.0], geometry=dict(floor_map=house))
+    assert stop.outcome == "success" and (stop.stand_x, stop.stand_y) == pytest.approx((2.95, -0.03))
+    around = math.dist((0.0, 0.0), (1.6, 1.07)) + math.dist((1.6, 1.07), (2.95, -0.03))  # by the wall's end
+    walked = stop.path - 3.0
+    assert walked >= around - 0.05 and walked > math.hypot(2.95, 0.03) + 0.6  # not the straight line through it
+    assert walked == pytest.approx(house.walk_length((0.0, 0.0), (2.95, -0.03)))
+    assert stop.steps == 4 + 0 + math.ceil(walked / 0.25) + 1
 
 
 def test_the_floor_map_stands_on_the_part_of_the_floor_the_agent_can_walk_to():

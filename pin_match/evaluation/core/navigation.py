@@ -5,7 +5,8 @@ with it (the paper's DINO: the lowest CM, yet SR 4.02). Without a simulator, the
 recorded stands in for the agent's exploration: it is followed unchanged until the stop policy
 fires on a frame whose matched points can be placed in the house (depth in PIN's sensor range);
 the matched points are back-projected with the frame's depth, pose and camera, and the agent walks
-straight toward their median (the goal point) and stops where an agent of PIN's radius can stand:
+toward their median (the goal point: the shortest walk on the floor map where there is one, around
+walls, else straight) and stops where an agent of PIN's radius can stand:
 on the floor, on the standable cell nearest the goal point where the frame-set has a floor map
 (``FloorMap.stand``), else on the floor below the goal point pulled back toward the agent by its
 radius and ``STAND_MARGIN``. Every outcome is measured from where the agent stands, on the floor,
@@ -179,8 +180,9 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
           placed: tuple[np.ndarray, str]) -> dict:
-    """The walk from where the agent stopped looking (``decision.stop``) straight to where it stands beside the
-    committed point."""
+    """The walk from where the agent stopped looking (``decision.stop``) to where it stands beside the committed
+    point: the shortest walk on the episode's floor map (around walls and furniture, ``FloorMap.walk_length``), the
+    straight line without one; the turns counted toward the straight heading."""
     t, source = int(decision.stop), int(decision.chosen)  # type: ignore[arg-type]  # a committed decision
     point, landed_on = placed
     stand = standing_point(geometry, point, places.xy[t])
@@ -195,8 +197,9 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
     heading = math.atan2(ahead[1], ahead[0]) if distance > 1e-9 else float(places.yaw[t])
     turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
     turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
-    steps = int(places.steps[t]) + turns + math.ceil(distance / FORWARD_STEP) + 1
-    path = float(places.walked[t]) + distance
+    walked = distance if geometry.floor_map is None else geometry.floor_map.walk_length(places.xy[t], stand[:2])
+    steps = int(places.steps[t]) + turns + math.ceil(walked / FORWARD_STEP) + 1
+    path = float(places.walked[t]) + walked
     geodesic = geometry.geodesic_distance
     spl = float(outcome == "success") * geodesic / max(path, geodesic) if max(path, geodesic) > 0 else 0.0
     return dict(episode_id=episode_id, target_object_id=target_id, outcome=outcome,
