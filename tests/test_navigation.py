@@ -176,6 +176,10 @@ def test_after_a_commit_the_agent_walks_around_a_wall_not_through_it(walk_set):
     assert walked >= around - 0.05 and walked > math.hypot(2.95, 0.03) + 0.6  # not the straight line through it
     assert walked == pytest.approx(house.walk_length((0.0, 0.0), (2.95, -0.03)))
     assert stop.steps == 4 + 0 + math.ceil(walked / 0.25) + 1
+    # from other sources on the same map (its graph built once, its lengths kept per source): by hand, 24 cells
+    # straight along y from the cell (2.95, -1.93) to the cell (2.95, 0.47), both beyond the wall
+    assert house.walk_length((2.95, -1.93), (2.95, 0.47)) == pytest.approx(2.4)
+    assert house.walk_length((-2.05, -0.03), (2.95, -0.03)) > 5.0 + 0.6  # around the wall's end too
 
 
 def test_the_floor_map_stands_on_the_part_of_the_floor_the_agent_can_walk_to():
@@ -451,9 +455,10 @@ def test_a_recording_with_poses_in_some_episodes_only_is_refused(walk_set, tmp_p
 
 # ---------------------------------------------------------------------- the default synthetic set: oracles
 def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
-    """Scores from the ground truth: each frame scores the share of it that an object of ``role`` covers, its one
-    point that object's pixel nearest the object's centroid."""
-    vis = fs.visibility[fs.visibility.role == role].drop_duplicates("frame_id").set_index("frame_id")
+    """Scores from the ground truth: each frame scores the share of it that the largest object of ``role`` covers,
+    its one point that object's pixel nearest the object's centroid."""
+    vis = fs.visibility[fs.visibility.role == role].sort_values("pixels", ascending=False)
+    vis = vis.drop_duplicates("frame_id").set_index("frame_id")
     rows = []
     for f in fs.frames.itertuples():
         score, xs, ys = 0.0, [], []
@@ -470,14 +475,26 @@ def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
 
 @pytest.mark.slow
 def test_oracles_on_the_default_set(default_synth):
-    """Matching the target wherever it shows is SR 100 %; matching its look-alikes instead is CE (they stand more
-    than 2 m from it)."""
+    """Matching the target wherever it shows succeeds in every episode whose walk shows it large (1,000 px: near, so
+    its point has depth) and in none whose walk never shows it: the exploration does not know the target, so the
+    oracle's SR is what the walks see, not 100 % (generator 7's val split: 7 of 15). Matching its look-alikes instead
+    is never a success (they stand more than 2 m from it) and a category error wherever one shows large."""
     ctx = EvalContext(default_synth)
     sigma = 1e-9  # any pixel of the object
-    target = metrics_of(episodes_at(ctx.placements(oracle_table(default_synth, "target"), "val"), sigma))
-    lookalike = metrics_of(episodes_at(ctx.placements(oracle_table(default_synth, "same_category"), "val"), sigma))
-    assert target["sr"] == 100.0 and target["ce"] == 0.0
-    assert lookalike["ce"] >= 90.0 and lookalike["sr"] == 0.0
+    val = default_synth.split("val")
+
+    def episodes_showing(role: str, pixels: int) -> set[str]:
+        vis = val.visibility[(val.visibility.role == role) & (val.visibility.pixels >= pixels)]
+        return set(vis.frame_id.str.rsplit("_", n=1).str[0])
+
+    target = episodes_at(ctx.placements(oracle_table(default_synth, "target"), "val"), sigma).set_index("episode_id")
+    success = set(target.index[target.outcome == "success"])
+    assert set(target.outcome) <= {"success", "not found"}
+    assert episodes_showing("target", 1000) <= success <= episodes_showing("target", 1) and success
+    lookalike = episodes_at(ctx.placements(oracle_table(default_synth, "same_category"), "val"), sigma)
+    errors = set(lookalike.episode_id[lookalike.outcome == "category error"])
+    assert set(lookalike.outcome) <= {"category error", "not found"}
+    assert episodes_showing("same_category", 1000) <= errors
 
 
 def test_depth_at_the_sensor_s_far_limit_is_no_depth(walk_set, monkeypatch):

@@ -150,7 +150,7 @@ class FloorMap:
 
     def _graph(self):
         """The standable cells as a graph: an edge between 8-neighbours, weighted by the distance of their centres."""
-        if "_graph" not in self.__dict__:
+        if "_graph_matrix" not in self.__dict__:
             from scipy.sparse import coo_matrix
 
             index = np.full(self.free.shape, -1, np.int64)
@@ -167,9 +167,9 @@ class FloorMap:
                 cols.append(other[ok])
                 weights.append(np.full(int(ok.sum()), self.cell * (math.sqrt(2.0) if di and dj else 1.0)))
             r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
-            self.__dict__["_graph"] = coo_matrix((np.r_[w, w], (np.r_[r, c], np.r_[c, r])),
+            self.__dict__["_graph_matrix"] = coo_matrix((np.r_[w, w], (np.r_[r, c], np.r_[c, r])),
                                                  shape=(len(cells), len(cells))).tocsr()
-        return self.__dict__["_graph"]
+        return self.__dict__["_graph_matrix"]
 
     def nearest(self, xyz: Sequence[float], floor: float) -> float:
         """The least distance from an agent standing anywhere on the map (on the floor at height ``floor``) to the
