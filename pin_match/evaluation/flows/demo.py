@@ -118,8 +118,9 @@ def reads_digest(root: Path, reads: tuple[str, ...]) -> str:
 # that render them
 SCANNED = DemoSet("scanned look-alikes", "",
                   "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
-                  "rendered along PIN walks that pass a look-alike and end at the target (AUROC-same: target vs "
-                  "look-alike frames)", scanned, ("verify", "effnet", "color"), "scanned.json",
+                  "in houses of three rooms, rendered along one exploration walk per house that does not know the "
+                  "target (AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
+                  "scanned.json",
                   ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", "data/synth/*.py",
                    "data/compose.py"))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",
