@@ -390,22 +390,32 @@ def test_every_approach_stops_with_its_target_large_and_passes_a_lookalike(appro
 
 @pytest.mark.slow
 def test_default_set_explores_houses_as_far_as_pins_episodes(default_synth):
-    """Generator 7's default set (seed 0), measured (docs/synthetic.md, "What an episode is"): a start-to-target
-    geodesic median of 6.2 m over its 30 episodes (val alone 4.5 m; PIN's example 8.24 m), the start in another room
-    than the target in 25 of 30, one walk rendered per house; its 96-step exploration sees 22 of 30 targets at all and
-    9 at 1,000 px or more. The bars sit under those figures: a change that shortened the episodes or hid the targets
-    from the tour (the tour looks at the furniture they stand on, nearest first) would fall below them."""
-    from benchmarks.walk_stats import SEEN_PX, rooms_of, stats
+    """Generator 7's default set (seed 0), measured (docs/synthetic.md, "What an episode is"; `python -m
+    benchmarks.walk_stats`): a start-to-target geodesic median of 6.2 m over its 30 episodes in 10 houses (val alone
+    4.5 m; PIN's example 8.24 m), the start in another room than the target in 25 of 30; its 96-step exploration
+    sees 22 of 30 targets at all and 9 at 1,000 px or more. The bars sit under those figures: a change that
+    shortened the episodes or hid the targets from the tour (the tour looks at the furniture they stand on, nearest
+    first) would fall below them."""
+    from pin_match.data.compose import stable_seed
+    from pin_match.data.synth.generate import ROOMS
+    from pin_match.data.synth.scene import make_house
 
-    whole = stats(default_synth)
-    assert whole["houses"] == 10 and whole["rendered_per_episode"] == pytest.approx(96 / 3)
-    assert whole["geodesic_min_median_max"][1] >= 5.0, whole
-    rooms = rooms_of(default_synth)
-    assert np.mean([a != b for a, b in rooms.values()]) >= 0.6, rooms
-    target = default_synth.visibility[default_synth.visibility.role == "target"]
+    fs = default_synth
+    assert fs.episodes.scene_id.nunique() == 10 and len(fs.episodes) == 30
+    geodesic = [fs.geometry.episodes[e].geodesic_distance for e in fs.episodes.episode_id]
+    assert np.median(geodesic) >= 5.0, sorted(geodesic)
+    houses = {h: make_house(np.random.default_rng(stable_seed(0, "scene", h)), ROOMS)
+              for h in set(fs.episodes.scene_id)}
+    other_room = []
+    for episode_id, house, target in zip(fs.episodes.episode_id, fs.episodes.scene_id, fs.episodes.target_object_id):
+        g = fs.geometry.episodes[episode_id]
+        rooms = houses[house].room_of(g.start.x, g.start.y), houses[house].room_of(*g.positions[target][:2])
+        other_room.append(rooms[0] != rooms[1])
+    assert np.mean(other_room) >= 0.6, other_room
+    target = fs.visibility[fs.visibility.role == "target"]
     seen = target.frame_id.str.rsplit("_", n=1).str[0]
-    assert seen.nunique() >= 0.6 * len(default_synth.episodes), seen.nunique()
-    assert seen[target.pixels >= SEEN_PX].nunique() >= 0.25 * len(default_synth.episodes)
+    assert seen.nunique() >= 0.6 * len(fs.episodes), seen.nunique()
+    assert seen[target.pixels >= 1000].nunique() >= 0.25 * len(fs.episodes)
 
 
 def test_refuses_existing_output(synth):
