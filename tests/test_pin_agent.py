@@ -629,3 +629,74 @@ def test_live_decisions_equal_offline_on_replayed_walks(seed):
             assert not any(found[:offline.stop]) and found[offline.stop]
             if text != "1-of-1":
                 assert not any(found[offline.stop + 1:])
+
+
+APPROACHES = ["approach:1", "approach:1+0.8", "approach:0.5-0.1", "approach:2+0.75@2-of-3"]
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_an_approach_runs_live_as_offline_on_replayed_walks(seed):
+    """Random walks whose steps see one of four objects, each with its own views from close by (a random count, some
+    none), replayed square by square: at each approach the agent feeds the object's views (each view two squares,
+    its distance from ``distance()``), arrives, and walks back (``resume``) after a rejection. The live ``Decision``
+    is the offline one with the same views, the commit names the same steps, and a remembered object is never walked
+    up to twice."""
+    from pin_match.evaluation.core.stop import CloseLook, StopPolicy, one_walk
+
+    rng = np.random.default_rng(seed)
+    for text in APPROACHES:
+        policy = StopPolicy.parse(text)
+        for _ in range(4):
+            squares = np.round(rng.uniform(0.2, 1.0, (int(rng.integers(1, 40)), 2)), 2)
+            objects = rng.integers(0, 4, len(squares))
+            views = {k: tuple((float(d), float(s)) for d, s in zip(np.round(rng.uniform(0.3, 2.5, n), 2),
+                                                                    np.round(rng.uniform(0.2, 1.0, n), 2)))
+                     for k, n in enumerate(rng.integers(0, 4, 4))}
+            unplaceable = set(np.flatnonzero(rng.uniform(size=len(squares)) < 0.2).tolist())
+            placeable = lambda step, cannot=unplaceable: step not in cannot  # noqa: E731
+            now = {"distance": 0.0}
+            detector = hand_detector(policy, sigma=0.7)
+            detector.reset(placeable=placeable, remember=lambda step, objects=objects: int(objects[step]),
+                           distance=lambda now=now: now["distance"])
+            walked_up = []
+            for step, pair in enumerate(squares):
+                hand_step(detector, step, pair)
+                if detector.approaching is None:
+                    continue
+                obj = int(objects[detector.approaching])
+                walked_up.append(obj)
+                for distance, score in views[obj]:
+                    now["distance"] = distance
+                    assert not any(m.any() for m in hand_step(detector, step, (score, score - 0.1)))
+                detector.arrived()
+                if detector.committed is not None:
+                    break
+                assert detector.returning
+                hand_step(detector, step, (1.0, 1.0))  # on the way back: not looked at
+                detector.resume()
+            offline = policy.decide(one_walk(squares.max(axis=1)), 0.7, placeable,
+                                    verify=lambda c, objects=objects, views=views: CloseLook(
+                                        int(objects[c]), views[int(objects[c])]))[0]
+            assert detector.decision == offline, (text, squares.tolist(), objects.tolist(), views)
+            assert len(walked_up) == len(set(walked_up))
+            if offline.stop is not None:
+                assert (detector.committed.step, detector.committed.at_step) == (offline.chosen, offline.stop)
+
+
+def test_an_approach_needs_the_agent_s_distance_and_its_calls_in_order():
+    detector = hand_detector("approach:1")
+    detector.reset()
+    with pytest.raises(PinAgentError, match=r"reset\(distance=\.\.\.\)"):
+        hand_step(detector, 0, (0.9, 0.1))
+    detector.reset(distance=lambda: 0.5)
+    with pytest.raises(PinAgentError, match="arrived without an approach"):
+        detector.arrived()
+    with pytest.raises(PinAgentError, match="resume without a rejection"):
+        detector.resume()
+    hand_step(detector, 0, (0.9, 0.1))
+    assert detector.approaching == 0 and detector.committed is None
+    detector.matcher.result = __import__("pin_match.contract.results", fromlist=["MatchResult"]).MatchResult(
+        score=0.9, points=[[0, 0]])
+    detector(SQUARE, HAND_REFERENCES, category=None)  # one square of a two-square view
+    with pytest.raises(PinAgentError, match="middle of a step"):
+        detector.arrived()

@@ -119,8 +119,9 @@ def policy_argument(s: argparse.ArgumentParser, what: str) -> None:
                    help=f"{what}: K-of-N (found when K of the last N frames are above sigma), house:topT+MARGIN "
                         "(above sigma and the mean of the T highest earlier scores of the episode plus MARGIN) or "
                         "look:W[+CLEAR] (after the first firing look W more frames, then commit to the best "
-                        "candidate; look:rest is the whole walk, an upper bound); default 1-of-1, PIN's rule; "
-                        "docs/metrics.md, 'Stop policies'")
+                        "candidate; look:rest is the whole walk, an upper bound) or approach:D[+SIGMA2] (walk up to "
+                        "a candidate, commit where a view within D m reaches SIGMA2, default sigma; tune finds SIGMA2 "
+                        "when it is not given); default 1-of-1, PIN's rule; docs/metrics.md, 'Stop policies'")
 
 
 def policy_of(a: argparse.Namespace):

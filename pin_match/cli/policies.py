@@ -41,8 +41,9 @@ def add_commands(sub: argparse._SubParsersAction) -> None:
 
     s = sub.add_parser("trade", help="SR, CE, SPL and Steps against the look-further window, per matcher",
                        description="Each matcher under each stop policy (default look:0,10,20,40 and the rest of the "
-                                   "walk): sigma tuned for the policy on the train split, read on val; trade.csv and "
-                                   "trade.png (docs/metrics.md, 'Stop policies').")
+                                   "walk): sigma tuned for the policy on the train split, read on val (an approach:D "
+                                   "policy's second line tuned with it); trade.csv and trade.png (docs/metrics.md, "
+                                   "'Stop policies').")
     s.add_argument("frameset", type=Path, help="frame-set to score (train and val splits)")
     s.add_argument("--matcher", action="append", required=True, help="matcher to include (repeatable)")
     add_bench_config(s)

@@ -89,6 +89,7 @@ class FrameSet:
         episodes = _episodes_table(root, records, objects)
         frames = _read_table(root / FRAMES, ["frame_id", "episode_id", "step", "image", "mask"])
         _check_frames(root, frames, episodes)
+        _check_approach_views(root, frames, episodes)
         frames = frames.merge(episodes[["episode_id", "split"]], on="episode_id", how="left")
         visibility = _read_table(root / VISIBILITY,
                                  ["frame_id", "object_id", "role", "mask_value", "pixels", "x0", "y0", "x1", "y1"])
@@ -162,6 +163,15 @@ class FrameSet:
         return sub
 
     @property
+    def approach_views(self) -> pd.DataFrame:
+        """The frames an agent meets walking up to an object to check it (``approach_of``: the object,
+        ``approach_distance``: horizontal metres to its centre), not frames of the walk; empty where the set has
+        none (docs/frameset.md, "Approach views")."""
+        if "approach_of" not in self.frames.columns:
+            return self.frames.iloc[:0]
+        return self.frames[self.frames.approach_of.notna()]
+
+    @property
     def navigation_missing(self) -> str | None:
         """Why PIN's navigation metrics cannot be estimated on this frame-set (None when they can)."""
         return missing_reason(self.manifest, self.frames)
@@ -173,7 +183,8 @@ class FrameSet:
         for name in (MANIFEST, OBJECTS, DESCRIPTIONS, EPISODES, VISIBILITY):
             h.update(name.encode())
             h.update((self.root / name).read_bytes())
-        frame_cols = [c for c in ("frame_id", "episode_id", "step", "sha256") if c in self.frames.columns]
+        frame_cols = [c for c in ("frame_id", "episode_id", "step", "sha256", "approach_of", "approach_distance")
+                      if c in self.frames.columns]
         h.update(pd.util.hash_pandas_object(self.frames[frame_cols], index=False).values.tobytes())
         for object_id in sorted(self.objects.object_id):
             for p in view_files(self.root / OBJECT_IMAGES / object_id):
@@ -297,6 +308,31 @@ def _check_frames(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> N
                 continue
             if not (root / rel).is_file():
                 raise FrameSetError(f"frame {frame_id!r}: missing {col} file {root / rel}")
+
+
+def _check_approach_views(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> None:
+    """An approach view names an object of its own episode and a finite distance >= 0 to it; both columns or
+    neither."""
+    path = root / FRAMES
+    if ("approach_of" in frames.columns) != ("approach_distance" in frames.columns):
+        raise FrameSetError(f"{path}: approach views need both columns 'approach_of' and 'approach_distance'")
+    if "approach_of" not in frames.columns:
+        return
+    views = frames[frames.approach_of.notna()]
+    placed = {e: {t, *d} for e, t, d in zip(episodes.episode_id, episodes.target_object_id,
+                                           episodes.distractor_object_ids)}
+    for frame_id, episode_id, object_id, distance in zip(views.frame_id, views.episode_id, views.approach_of,
+                                                         views.approach_distance):
+        if not isinstance(object_id, str) or object_id not in placed.get(episode_id, ()):
+            raise FrameSetError(f"{path}: frame {frame_id!r} is an approach view of {object_id!r}, which is not an "
+                                f"object of its episode {episode_id!r}")
+        try:
+            ok = np.isfinite(float(distance)) and float(distance) >= 0
+        except (TypeError, ValueError):
+            ok = False
+        if not ok:
+            raise FrameSetError(f"{path}: frame {frame_id!r} has approach_distance {distance!r}, not a finite "
+                                "distance >= 0 m")
 
 
 def _check_visibility(root: Path, vis: pd.DataFrame, frames: pd.DataFrame, objects: pd.DataFrame) -> None:

@@ -138,6 +138,22 @@ class FloorMap:
         return float(walked + ends) if np.isfinite(walked) else float(np.hypot(*(np.asarray(b_xy)[:2] -
                                                                                    np.asarray(a_xy)[:2])))
 
+    def path(self, a_xy: Sequence[float], b_xy: Sequence[float]) -> np.ndarray:
+        """The shortest walk of ``walk_length`` as waypoints (K, 2), from ``a_xy`` through the standable cells'
+        centres to ``b_xy``; the straight line where no walk joins them."""
+        from scipy.sparse.csgraph import dijkstra
+
+        centres = self.centres
+        a, b = (int(np.argmin(np.hypot(*(centres - np.asarray(p, np.float64)[:2]).T))) for p in (a_xy, b_xy))
+        ends = np.asarray(a_xy, np.float64)[:2], np.asarray(b_xy, np.float64)[:2]
+        lengths, parents = dijkstra(self._graph(), indices=a, return_predecessors=True)
+        if not np.isfinite(lengths[b]):
+            return np.stack(ends)
+        cells = [b]
+        while cells[-1] != a:
+            cells.append(int(parents[cells[-1]]))
+        return np.vstack([ends[0], centres[cells[::-1]], ends[1]])
+
     def _lengths_from(self, source: int) -> np.ndarray:
         """Walk lengths from the standable cell ``source`` (an index into ``centres``) to every one, cached per
         source: a sweep of sigmas asks the same few sources again and again."""

@@ -9,6 +9,7 @@ handed to the writer afterwards.
 from __future__ import annotations
 
 import hashlib
+import math
 import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -48,6 +49,9 @@ class Frame:
     ``mask`` holds per-pixel values (0 = background); ``legend`` maps each value to
     (object id or None when the recording cannot tell instances apart, role). Depth is in metres
     along the view axis (0 or NaN: no hit); ``pose`` is the camera's in the episode's house frame.
+    ``approach``: (object id, horizontal metres from the camera to its centre) for a view an agent meets
+    walking up to that object to check it, which only an approach-verify policy reads (docs/frameset.md);
+    None for a frame of the walk.
     """
 
     image: np.ndarray
@@ -55,6 +59,7 @@ class Frame:
     legend: Mapping[int, tuple[str | None, str]]
     depth: np.ndarray | None = None
     pose: Pose | None = None
+    approach: tuple[str, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -120,6 +125,8 @@ def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
                sha256=hashlib.sha256((root / rel_image).read_bytes()).hexdigest())
     if frame.pose is not None:
         row.update(frame.pose.row())
+    if frame.approach is not None:
+        row.update(_approach_columns(frame_id, frame.approach))
     depth_mm = None
     if depth is not None:
         if depth.shape != mask.shape:
@@ -131,6 +138,13 @@ def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
         row["depth"] = f"depth/{episode_id}/{step:04d}.png"
         atomic.write_image(root / row["depth"], depth_mm)
     return FrameRecord(row, visibility_rows(frame_id, mask16, frame.legend, depth_mm))
+
+
+def _approach_columns(frame_id: str, approach: tuple[str, float]) -> dict:
+    object_id, distance = approach
+    if not (isinstance(object_id, str) and object_id and math.isfinite(float(distance)) and distance >= 0):
+        raise FrameSetError(f"frame {frame_id}: approach {approach!r} is not (object id, finite distance >= 0 m)")
+    return dict(approach_of=object_id, approach_distance=float(distance))
 
 
 def visibility_rows(frame_id: str, mask: np.ndarray, legend: Mapping[int, tuple[str | None, str]],

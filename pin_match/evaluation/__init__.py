@@ -23,14 +23,14 @@ from pin_match.evaluation.core.evaluator import (
 from pin_match.evaluation.core.metrics import Bootstrap
 from pin_match.evaluation.core.policies import tune_policy
 from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, load_threshold, resolve_sigma
-from pin_match.evaluation.core.stop import FIRST_MATCH, HouseStop, LookFurther, StopPolicy
+from pin_match.evaluation.core.stop import FIRST_MATCH, ApproachVerify, HouseStop, LookFurther, StopPolicy
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE, OBJECTIVES, TuningError, tune, write_thresholds
 from pin_match.evaluation.flows.bench import SigmaRule, bench
 from pin_match.evaluation.flows.report import report
 from pin_match.evaluation.flows.trade import trade
 
-__all__ = ["DEFAULT_OBJECTIVE", "FIRST_MATCH", "OBJECTIVES", "Bootstrap", "EvalContext", "EvaluationError",
-           "HouseStop", "LookFurther", "SigmaChoice", "SigmaError", "SigmaRule", "StopPolicy", "TuningError",
-           "bench", "check_frameset", "evaluate", "load_threshold", "report", "resolve_sigma", "split_frames",
-           "sweep", "table_subset", "trade", "tune", "tune_policy", "write_thresholds"]
+__all__ = ["DEFAULT_OBJECTIVE", "FIRST_MATCH", "OBJECTIVES", "ApproachVerify", "Bootstrap", "EvalContext",
+           "EvaluationError", "HouseStop", "LookFurther", "SigmaChoice", "SigmaError", "SigmaRule", "StopPolicy",
+           "TuningError", "bench", "check_frameset", "evaluate", "load_threshold", "report", "resolve_sigma",
+           "split_frames", "sweep", "table_subset", "trade", "tune", "tune_policy", "write_thresholds"]

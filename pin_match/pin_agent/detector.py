@@ -32,12 +32,22 @@ estimate's ``placeable``; a firing whose candidate cannot is passed over. The ca
 an earlier step's, so the agent places the goal from that step's depth and pose: it keeps the
 last window's steps beside the detector. A house-relative line reads the house's level, kept
 step by step (``stop.RunningLevel``), so no step reads the whole walk again for it.
+
+Under an approach-verify policy (``policy="approach:1+0.6"``) a firing sends the agent to the candidate first:
+after the step's last square, ``approaching`` names the candidate's step (its goal placed from
+``candidate_maps(step)``, as a commit's). The steps the agent sees on its way are views of the candidate, not steps
+of its walk: each one's distance to the candidate comes from ``reset(distance=...)``, asked once a view. At the
+standing point the agent calls ``arrived()``: the policy decides on the views (the same ``decide``, the views given
+as ``stop.CloseLook``) and commits (``committed``, the maps as for any commit) or rejects the candidate. After a
+rejection the agent walks back to its route, ``returning`` is true, the squares it passes are not looked at (empty
+maps), and ``resume()`` takes the walk up again. ``reset(remember=...)`` says what the agent remembers of a step's
+candidate (its goal's map cell): a later firing on the same thing is passed over without walking up to it.
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Hashable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -50,7 +60,16 @@ from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Mat
 from pin_match.contract.registry import create_matcher
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
-from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, LookFurther, Placeable, StopPolicy, one_walk
+from pin_match.evaluation.core.stop import (
+    FIRST_MATCH,
+    ApproachVerify,
+    CloseLook,
+    Decision,
+    LookFurther,
+    Placeable,
+    StopPolicy,
+    one_walk,
+)
 
 
 class PinAgentError(PinMatchError, ValueError):
@@ -129,13 +148,22 @@ class PinDetector:
     def last_score(self) -> float | None:
         return None if self.last_result is None else self.last_result.score
 
-    def reset(self, placeable: Placeable | None = None) -> None:
+    def reset(self, placeable: Placeable | None = None, remember: Callable[[int], Hashable] | None = None,
+              distance: Callable[[], float] | None = None) -> None:
         """A new episode: the next ``forward`` prepares the matcher for its references, once. ``placeable(step)``:
         can the candidate of that step (0-based since this reset) be placed in the house? The agent answers from the
         step's depth and ``candidate_maps(step)``; it may be asked again, and about the present step while its later
         squares are still to come (points added by a later square only make a candidate placeable). None: every
-        candidate can (PIN's agent finds out itself)."""
+        candidate can (PIN's agent finds out itself). Under an approach-verify policy, ``remember(step)``: what the
+        agent remembers of that step's candidate once rejected (None: the step itself); ``distance()``: the agent's
+        distance now to the candidate it walks up to, in metres (needed by that policy)."""
         self._episode_open = True
+        self._remember = remember
+        self._distance = distance
+        self.approaching: int | None = None  # the step whose candidate the agent walks up to
+        self.returning = False  # walking back to its route after a rejection
+        self._views: dict[int, list[tuple[float, float]]] = {}  # per candidate step, its views (distance, score)
+        self._looks: dict[int, tuple[tuple[float, float], ...]] = {}  # per candidate walked up to, its views
         self._prepared = False
         self._placeable = placeable
         self.last_result: MatchResult | None = None
@@ -153,16 +181,58 @@ class PinDetector:
             raise PinAgentError("PinDetector.forward before reset(): PIN's preprocessor resets the detector at the "
                                 "start of every episode (CowObsPreprocessor.reset)")
         image = _square(obs, self.resize_dim)
+        if self.returning:
+            return torch.zeros(image.shape[:2], dtype=torch.float32)
         if not self._prepared:
+            if isinstance(self.policy, ApproachVerify) and self._distance is None:
+                raise PinAgentError(f"stop policy {self.policy} weighs the views within {self.policy.distance:g} m of "
+                                    "a candidate: reset(distance=...) must say how far the agent is from it")
             self.matcher.prepare(episode_target(references, category, self.matcher))
             self._prepared = True
         self.last_result = self.matcher.match(image)
+        if self.approaching is not None:
+            self._view(self.last_result.score)
+            return torch.zeros(image.shape[:2], dtype=torch.float32)
         self._keep(self.last_result, image.shape[:2])
         if self.committed is None:
             self._decide()
         elif self.committed.step == len(self._steps) - 1:  # the candidate's later squares join its maps
             self.committed = self._commit(self.committed.step, self.committed.at_step)
         return self._answer()
+
+    def arrived(self) -> None:
+        """The agent stands beside the candidate it walked up to: the policy commits to it or rejects it (then the
+        agent walks back, ``returning``, until ``resume``)."""
+        if self.approaching is None:
+            raise PinAgentError("PinDetector.arrived without an approach: the detector names the candidate to walk up "
+                                "to in ``approaching``")
+        views = self._views.pop(self.approaching, [])
+        if views and len(views) * self.squares_per_step != self._view_squares:
+            raise PinAgentError("PinDetector.arrived in the middle of a step: pass every square of the last view first")
+        self._looks[self.approaching] = tuple(views)
+        self.approaching = None
+        self._decide()
+        self.returning = self.committed is None
+
+    def resume(self) -> None:
+        """The agent is back on its route after a rejection: its next steps are its walk's again."""
+        if not self.returning:
+            raise PinAgentError("PinDetector.resume without a rejection to walk back from")
+        self.returning = False
+
+    def _view(self, score: float) -> None:
+        """A square seen on the way to the candidate: a view is a step's squares, its score their best."""
+        views = self._views.setdefault(self.approaching, [])  # type: ignore[arg-type]  # approaching
+        if self._view_squares % self.squares_per_step == 0:
+            views.append((float(self._distance()), -np.inf))  # type: ignore[misc]  # reset checked it is set
+        distance, best = views[-1]
+        views[-1] = (distance, max(best, float(score)))
+        self._view_squares += 1
+
+    def _close_look(self, step: int) -> CloseLook:
+        """A step's candidate as the policy meets it live: remembered as ``remember`` says, its views once arrived."""
+        key = step if self._remember is None else self._remember(step)
+        return CloseLook(key, self._looks.get(step))
 
     def candidate_maps(self, step: int) -> tuple[torch.Tensor, ...]:
         """Each square's map of a step so far, at the step's line (sigma, or the policy's above it): the points a
@@ -187,12 +257,14 @@ class PinDetector:
         and a candidate placeable on part of its points is placeable on all), any other at the step's last square."""
         present = len(self._steps) - 1
         decision = self.policy.decide(one_walk(np.array(self._scores)), self.sigma, self._placeable,
-                                      np.array(self._levels))[0]
+                                      np.array(self._levels), verify=self._close_look)[0]
         complete = len(self._steps[-1]) == self.squares_per_step
         if not complete and (decision.stop, decision.chosen) != (present, present):
             return
         self.decision = decision
-        if decision.stop is not None:
+        if decision.approaching is not None:  # after the step's last square: the agent leaves its walk for it
+            self.approaching, self._view_squares = decision.approaching, 0
+        elif decision.stop is not None:
             self.committed = self._commit(int(decision.chosen), present)  # type: ignore[arg-type]  # a commit's
 
     def _commit(self, step: int, at_step: int) -> Commit:

@@ -17,7 +17,7 @@ import numpy as np
 
 from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
 from pin_match.data.frameset import FrameSet
-from pin_match.data.geometry import CameraModel, EpisodeGeometry
+from pin_match.data.geometry import CameraModel, EpisodeGeometry, FloorMap
 from pin_match.data.geometry import Pose as CameraPose
 from pin_match.data.synth.clutter import choose_scanned, colour_double
 from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
@@ -31,6 +31,7 @@ from pin_match.data.synth.walk import (
     CAMERA_HEIGHT,
     Goal,
     Pose,
+    approach_poses,
     camera_walk,
     exploration_walk,
     floor_map,
@@ -39,7 +40,8 @@ from pin_match.data.synth.walk import (
 from pin_match.data.writer import Frame, FrameRecord, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame
 
 HFOV = 42.0  # horizontal field of view of the rendered camera, degrees
-GENERATOR_VERSION = 7  # 7: houses of rooms, one exploration walk per house that does not know the target
+GENERATOR_VERSION = 8  # 7: houses of rooms, one exploration walk per house that does not know the target; 8: approach
+# views of every annotated object after the walk (``walk.approach_poses``)
 ROOMS = 3  # rooms per house
 TARGETS_PER_HOUSE = 3  # episodes per house: one render of the exploration walk serves each
 REACH = 0.9  # metres: the farthest from an agent standing beside it a target or look-alike's centre may be (PIN's 1 m
@@ -62,6 +64,7 @@ class HousePlan:
     walk: str
     staging: str
     clutter: tuple[ObjectSpec, ...] = ()  # scanned products in the house that are background (``clutter``)
+    approach_views: bool = True  # render what an agent sees walking up to each annotated object (``approach_poses``)
 
 
 PlannedHouse = tuple[str, str, list[ObjectSpec], list[tuple[str, int]]]  # house id, split, objects, (episode, target)
@@ -161,15 +164,15 @@ def _camera_pose(pose: Pose) -> CameraPose:
     return CameraPose(x, y, CAMERA_HEIGHT, yaw, pitch)
 
 
-def _episode_geometry(ids: list[str], families: list[str], target: int, house: Room, obstacles,
-                      walk: list[Pose], centres: list[tuple[float, float, float]]) -> EpisodeGeometry:
+def _episode_geometry(ids: list[str], families: list[str], target: int, house: Room, stage: _Stage, walk: list[Pose],
+                      floor: FloorMap) -> EpisodeGeometry:
     """Where the walk starts, every annotated object's centre, the geodesic length to the target and to each of its
     same-family look-alikes, and where an agent can stand."""
     measured = [target] + [k for k, f in enumerate(families) if f == families[target] and k != target]
-    lengths = geodesic_lengths(house, obstacles, walk[0][:2], [centres[k][:2] for k in measured])
+    lengths = geodesic_lengths(house, stage.obstacles, walk[0][:2], [stage.centres[k][:2] for k in measured])
     x, y, yaw, _ = walk[0]
-    return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, centres)),
-                           {ids[k]: length for k, length in zip(measured, lengths)}, floor_map(house, obstacles))
+    return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, stage.centres)),
+                           {ids[k]: length for k, length in zip(measured, lengths)}, floor)
 
 
 def _within_reach(room: Room):
@@ -255,31 +258,36 @@ def render_house(plan: HousePlan) -> list[EpisodeOutput]:
         groups = [(camera_walk(house, stage.obstacles, stage.looks[t],
                                [stage.looks[k] for k, f in enumerate(families) if f == families[t] and k != t],
                                plan.frames, rng, sight), [(episode_id, t)]) for episode_id, t in plan.episodes]
+    floor = floor_map(house, stage.obstacles)
     out = {}
     for walk, episodes in groups:
-        records = _render_walk(r, walk, stage, light, camera, plan, episodes)
+        views = [(pose, (ids[k], distance)) for k, centre in enumerate(stage.centres) if plan.approach_views
+                 for pose, distance in approach_poses(floor, walk, centre)]
+        shots = [(pose, None) for pose in walk] + views  # the approach views' steps follow the walk's
+        records = _render_walk(r, shots, stage, light, camera, plan, episodes)
         for episode_id, t in episodes:
             out[episode_id] = (episode_id, records[episode_id],
-                               _episode_geometry(ids, families, t, house, stage.obstacles, walk, stage.centres))
+                               _episode_geometry(ids, families, t, house, stage, walk, floor))
     return [out[episode_id] for episode_id, _ in plan.episodes]
 
 
-def _render_walk(r: Renderer, walk: list[Pose], stage: _Stage, light: Light, camera, plan: HousePlan,
-                 episodes: list[tuple[str, int]]) -> dict[str, list[FrameRecord]]:
-    """Each pose rendered and developed once, then written for every episode in ``episodes`` with its own roles."""
+def _render_walk(r: Renderer, shots: list[tuple[Pose, tuple[str, float] | None]], stage: _Stage, light: Light, camera,
+                 plan: HousePlan, episodes: list[tuple[str, int]]) -> dict[str, list[FrameRecord]]:
+    """Each pose rendered and developed once, then written for every episode in ``episodes`` with its own roles; a
+    shot's second part marks an approach view (``Frame.approach``)."""
     vfov = vertical_fov(HFOV, FRAME_WIDTH, FRAME_HEIGHT)
     legends = {episode_id: {k + 1: (s.object_id, "target" if k == t else "same_category"
                                     if s.category == plan.objects[t].category else "other")
                             for k, s in enumerate(plan.objects)} for episode_id, t in episodes}
     records: dict[str, list[FrameRecord]] = {episode_id: [] for episode_id, _ in episodes}
-    for step, pose in enumerate(walk):
+    for step, (pose, approach) in enumerate(shots):
         rgb, bodies, depth = r.render(_camera(pose), FRAME_WIDTH, FRAME_HEIGHT, vfov, light)
         noise = np.random.default_rng(stable_seed(plan.seed, "noise", step))
         image = camera.develop(rgb, noise)
         stored = ImageFile(".jpg", camera.encode(image, noise))  # stored: the camera's JPEG
         mask = stage.lut[bodies + 1]
         for episode_id, legend in legends.items():
-            frame = Frame(image, mask, legend, depth, _camera_pose(pose))
+            frame = Frame(image, mask, legend, depth, _camera_pose(pose), approach)
             records[episode_id].append(encode_frame(plan.staging, episode_id, step, frame, stored))
     return records
 
@@ -317,7 +325,8 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
     rendered_specs = [s for s in specs if s.split in size.splits]
     provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
                       objects_per_family=size.objects_per_family, frames_per_episode=size.frames_per_episode,
-                      walk=size.walk, rooms=ROOMS, targets_per_house=TARGETS_PER_HOUSE,
+                      walk=size.walk, approach_views=size.approach_views, rooms=ROOMS,
+                      targets_per_house=TARGETS_PER_HOUSE,
                       scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV,
                       camera_height=CAMERA_HEIGHT)
@@ -346,7 +355,8 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                                          np.random.default_rng(stable_seed(seed, "clutter", house_id)))
                 plans.append(HousePlan(house_id, split, stable_seed(seed, "scene", house_id),
                                        stable_seed(seed, "house", house_id), tuple(objs), tuple(episodes),
-                                       size.frames_per_episode, size.walk, str(writer.staging), tuple(clutter)))
+                                       size.frames_per_episode, size.walk, str(writer.staging), tuple(clutter),
+                                       size.approach_views))
             for episodes in tqdm(imap(render_house, plans), total=len(plans), desc="render houses", unit="house",
                                  disable=not progress, dynamic_ncols=True):
                 for episode_id, records, geometry in episodes:

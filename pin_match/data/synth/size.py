@@ -18,6 +18,7 @@ class SynthSize:
     frames_per_episode: int = 96  # the exploration's step budget (PIN's episodes: up to 1,000 steps)
     splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
     walk: str = "explore"  # "explore": blind to the target, one per house; "approach": heads for the target
+    approach_views: bool = True  # what an agent sees walking up to each annotated object, after the walk's frames
 
 
 WALKS = ("explore", "approach")  # an exploration blind to the target, one a house; a walk that heads for it

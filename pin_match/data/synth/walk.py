@@ -299,6 +299,37 @@ def _sweep(at: np.ndarray, centre: np.ndarray, front: np.ndarray, surfaces: list
     return tuple(_wrap(first + k * TURN * np.sign(_wrap(ends[1] - ends[0]))) for k in range(turns + 1))
 
 
+APPROACH_BACK = (1.0, 0.5, 0.0)  # metres of walk before the standing point at which an approach view is taken
+APPROACH_RANGE = 2.5  # metres: a view farther than this from the object (horizontally) is not a close look
+
+
+def approach_poses(floor: FloorMap, walk: Sequence[Pose], centre: Sequence[float]) -> list[tuple[Pose, float]]:
+    """What an agent sees walking up to an object to check it, far to near: from the walk's pose nearest the object
+    along the floor map's shortest walk to where it stands beside it (``FloorMap.stand``), a view ``APPROACH_BACK``
+    metres of walk before the standing point, facing the object's centre (tilted to centre it), each with its
+    horizontal distance to the centre; views beyond ``APPROACH_RANGE`` are left out.
+
+    One approach per object, not per point the agent might leave its walk from: the nearest pose stands for every
+    departure (docs/synthetic.md)."""
+    xy = np.array([pose[:2] for pose in walk], np.float64)
+    goal = np.asarray(centre[:2], np.float64)
+    start = xy[int(np.argmin(np.hypot(*(xy - goal).T)))]
+    path = floor.path(start, floor.stand(goal, start))
+    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))]
+    look = Goal(float(goal[0]), float(goal[1]), float(centre[2]), 0.0)
+    out = []
+    for back in APPROACH_BACK:
+        if back > along[-1] + 1e-9:
+            continue
+        eye = np.array([np.interp(along[-1] - back, along, path[:, 0]), np.interp(along[-1] - back, along, path[:, 1])])
+        distance = float(np.hypot(*(goal - eye)))
+        if distance > APPROACH_RANGE:
+            continue
+        yaw = float(np.arctan2(*(goal - eye)[::-1])) if distance > 1e-9 else float(walk[0][2])
+        out.append(((float(eye[0]), float(eye[1]), yaw, _pitch_for(eye, look, centre=True)), distance))
+    return out
+
+
 def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, float]], start: Sequence[float],
                      goals: Sequence[Sequence[float]]) -> list[float]:
     """PIN's ``geodesic_distance`` from ``start`` (x, y) to each goal (x, y): the shortest walk on the camera's grid

@@ -27,32 +27,43 @@ from pin_match.evaluation.core.metrics import (
     threshold_metrics,
     to_python,
 )
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, episode_bounds, fired_arrays, found_frames
+from pin_match.evaluation.core.stop import (
+    FIRST_MATCH,
+    Decision,
+    StopPolicy,
+    episode_bounds,
+    fired_arrays,
+    found_frames,
+)
 
 COMMIT_COLUMNS = ["episode_id", "committed_step", "committed_class", "committed_score", "fired_step", "commit_step",
-                  "looked_frames", "candidates"]
+                  "looked_frames", "candidates", "rejected"]
 COMMIT_KEYS = ("commit_target_pct", "commit_lookalike_pct", "commit_other_pct", "commit_none_pct", "still_looking_pct",
                "frames_looked_at")
 
 
-def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFrame:
+def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy,
+                decisions: list[Decision] | None = None) -> pd.DataFrame:
     """One row per episode (``COMMIT_COLUMNS``): the frame committed to (0-based step, class TM / CM / GM / OM,
     score), the firing that opened the window, the frame where the agent committed, the frames it had looked at by
-    then (1-based) and how many candidates it weighed; None where it never commits. An episode still looking when
-    the walk ended has its firing and candidates but no commit; it looked at its whole walk."""
+    then (1-based), how many candidates it weighed and how many of them it walked up to and rejected; None where it
+    never commits. An episode still looking when the walk ended (a window still open, or every candidate rejected)
+    has its firing and candidates but no commit; it looked at its whole walk. ``decisions``: the policy's, where the
+    caller made them with what the house says (``navigation.walk_decisions``); None: ``policy.decide`` with every
+    candidate placeable and its own frame for its close look."""
     rows = []
-    for (start, end), d in zip(episode_bounds(arr), policy.decide(arr, sigma)):
+    for (start, end), d in zip(episode_bounds(arr), decisions or policy.decide(arr, sigma)):
         episode_id = str(arr.episode_ids[arr.episode[start]])
         if d.chosen is None:
             rows.append(dict(episode_id=episode_id, fired_step=None if d.fired is None else d.fired - start,
-                             looked_frames=end - start, candidates=len(d.candidates)))
+                             looked_frames=end - start, candidates=len(d.candidates), rejected=len(d.rejected)))
             continue
         fired, stop = int(d.fired), int(d.stop)  # type: ignore[arg-type]  # a committed decision has both
         rows.append(dict(episode_id=episode_id, committed_step=d.chosen - start,
                          committed_class=CLASSES[arr.cls[d.chosen]], committed_score=float(arr.score[d.chosen]),
                          fired_step=fired - start, commit_step=stop - start, looked_frames=stop - start + 1,
-                         candidates=len(d.candidates)))
-    steps = ["committed_step", "fired_step", "commit_step", "looked_frames", "candidates"]
+                         candidates=len(d.candidates), rejected=len(d.rejected)))
+    steps = ["committed_step", "fired_step", "commit_step", "looked_frames", "candidates", "rejected"]
     return pd.DataFrame(rows, columns=COMMIT_COLUMNS).astype({column: "Int64" for column in steps})
 
 

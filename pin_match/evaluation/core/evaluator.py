@@ -31,7 +31,7 @@ from pin_match.evaluation.core.metrics import (
     localisation_metrics,
     per_category,
 )
-from pin_match.evaluation.core.navigation import Placements, episodes_at, navigation_metrics
+from pin_match.evaluation.core.navigation import Placements, episodes_at, navigation_metrics, walk_decisions
 from pin_match.evaluation.core.sigma import SigmaChoice, way_out
 from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, describe
 from pin_match.scoring.table import ScoreTable
@@ -96,8 +96,13 @@ class EvalContext:
         key = (id(table), None if split in (None, "all") else split)
         if key not in self._placements:
             _, scored, arr = self._split(table, split)
-            self._placements[key] = Placements(self.fs, scored, arr, table.frames)
+            self._placements[key] = Placements(self.fs, scored, arr, table.frames, self.approach_scored(table, split))
         return self._placements[key]
+
+    def approach_scored(self, table: ScoreTable, split: str | None) -> pd.DataFrame:
+        """The frame labels of one split's scored approach views with their score (empty where the set has none)."""
+        scored = scored_frames(self.labels, table, approach=True)
+        return scored if split in (None, "all") else scored[scored.split == split].reset_index(drop=True)
 
     def _split(self, table: ScoreTable, split: str | None) -> tuple[ScoreTable, pd.DataFrame, FrameArrays]:
         key = (id(table), None if split in (None, "all") else split)
@@ -151,7 +156,8 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
         navigation = {"policy": describe(policy), **estimate}
     commits = None
     if policy != FIRST_MATCH:
-        commits = commitments(arr, sigma.value, policy)
+        decisions = None if walks is None else walk_decisions(ctx.placements(table, split), sigma.value, policy)[0]
+        commits = commitments(arr, sigma.value, policy, decisions)
         committed = commit_metrics(commits, ctx.clusters, ctx.boot)
         metrics.update(committed["metrics"])
         ci95.update(committed["ci95"])

@@ -24,7 +24,7 @@ FIT_CLASSES = {"target": (TM,), "same_category": (CM,), "other": (GM, OM)}  # wh
 UNUSED = -1  # a row a fit leaves out (``class_weights`` gives it no weight)
 
 LABEL_COLUMNS = ["frame_id", "episode_id", "step", "split", "target_category", "target_visible", "same_visible",
-                 "other_visible", "target_pixels", "target_depth", "target_seen"]
+                 "other_visible", "target_pixels", "target_depth", "target_seen", "approach"]
 
 
 class LabelError(PinMatchError, ValueError):
@@ -35,7 +35,8 @@ def frame_labels(fs: FrameSet) -> pd.DataFrame:
     """One row per frame of ``fs`` with the visibility facts the metrics classify by.
 
     ``target_seen`` is 1.0 / 0.0, or NaN where the rule cannot be decided (the target is
-    large enough but the frame-set has no depth for it).
+    large enough but the frame-set has no depth for it). ``approach``: the frame is an approach view (what an agent
+    sees walking up to an object to check it), which no metric of the walk reads (``scored_frames``).
     """
     frames, vis = fs.frames, fs.visibility
     out = frames[["frame_id", "episode_id", "step", "split"]].copy()
@@ -55,6 +56,7 @@ def frame_labels(fs: FrameSet) -> pd.DataFrame:
     out["target_pixels"] = pixels.astype(np.int64)
     out["target_depth"] = mean_depth
     out["target_seen"] = seen_rule(pixels, area, mean_depth)
+    out["approach"] = frames["approach_of"].notna().to_numpy() if "approach_of" in frames.columns else False
     return out[LABEL_COLUMNS]
 
 
@@ -91,8 +93,9 @@ def seen_rule(pixels: np.ndarray, area: np.ndarray, depth: np.ndarray) -> np.nda
     return np.where(false, 0.0, np.where(np.isnan(big) | np.isnan(near), np.nan, 1.0))
 
 
-def scored_frames(labels: pd.DataFrame, table: ScoreTable) -> pd.DataFrame:
-    """Labels of the frames the table scored, with their score; the table defines the scope.
+def scored_frames(labels: pd.DataFrame, table: ScoreTable, approach: bool = False) -> pd.DataFrame:
+    """Labels of the walk's frames the table scored, with their score; the table defines the scope. ``approach``:
+    the approach views instead, which only an approach-verify policy reads (``stop.ApproachVerify``).
 
     A scored frame the labels do not know means the scores belong to another frame-set,
     and a non-finite score would silently count as unmatched: both are errors naming the frame.
@@ -103,7 +106,8 @@ def scored_frames(labels: pd.DataFrame, table: ScoreTable) -> pd.DataFrame:
         raise LabelError(f"score table of {table.matcher_id} has frame {unknown.iloc[0]!r}, which the frame-set "
                          f"does not contain (scored on another frame-set?)")
     require_finite(scores.frame_id, scores.score, f"score table of {table.matcher_id}", LabelError)
-    return labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
+    scored = labels.merge(scores, on="frame_id", how="inner", validate="one_to_one")
+    return scored[scored["approach"] == approach].reset_index(drop=True)
 
 
 def localisation_hits(fs: FrameSet, table: ScoreTable, sigma: float) -> pd.DataFrame:

@@ -36,20 +36,33 @@ from pin_match.data.geometry import AGENT_RADIUS, EpisodeGeometry, Geometry
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.intervals import Clusters, per_episode_intervals
 from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
-from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy, episode_bounds
+from pin_match.evaluation.core.stop import (
+    FIRST_MATCH,
+    ApproachVerify,
+    CloseLook,
+    Decision,
+    StopPolicy,
+    Verify,
+    episode_bounds,
+)
 
 SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
 FORWARD_STEP = 0.25  # metres per forward action
 TURN = math.radians(30.0)  # one turn action
 DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: below the first or at the second a pixel has no depth
 STAND_MARGIN = 0.1  # metres: without a floor map the agent stops this far beyond its radius short of the goal point
+ON_OBJECT = 0.5  # metres: a goal point this near an object's centre is on it (its approach views are the close look)
+REMEMBERED_CELL = 0.5  # metres: a rejected goal on no object is remembered as its floor cell of this size
+ABOUT_FACE = 6  # turns of 30 degrees: the agent turns back to its walk after rejecting a candidate
 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
+REJECTION_KEYS = ("rejections", "rejected_target_pct", "rejected_lookalike_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
                    "landed_on", "point_x", "point_y", "point_z", "stand_x", "stand_y", "d2g", "path", "geodesic", "spl",
-                   "steps", "unplaced_candidates", "fired_step", "candidates"]
+                   "steps", "unplaced_candidates", "fired_step", "candidates", "rejected", "rejected_target",
+                   "rejected_lookalike", "rejections"]
 
 
 class NavigationError(PinMatchError, ValueError):
@@ -72,7 +85,8 @@ class Placements:
     Built once per (table, split) and asked at any sigma, so a sweep reads each frame's depth once.
     """
 
-    def __init__(self, fs: FrameSet, scored: pd.DataFrame, arr: FrameArrays, table_frames: pd.DataFrame) -> None:
+    def __init__(self, fs: FrameSet, scored: pd.DataFrame, arr: FrameArrays, table_frames: pd.DataFrame,
+                 approach: pd.DataFrame | None = None) -> None:
         reason = fs.navigation_missing
         if reason is not None:
             raise NavigationError(f"no navigation estimate on {fs.root}: {reason}")
@@ -95,6 +109,22 @@ class Placements:
         # read per stop at every sigma of a sweep: looked up in dicts, not in the tables
         self.category = dict(zip(fs.objects.object_id, fs.objects.category.astype(str)))
         self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
+        self.views = _approach_views(fs, approach)
+
+    def close_look(self, frame: int, placed: tuple[np.ndarray, str]) -> CloseLook:
+        """Frame ``frame``'s candidate, placed at ``placed``'s goal point, as an agent walking up to it meets it: the
+        approach views of the object the goal is on (its centre within ``ON_OBJECT``), remembered as that object;
+        a goal on no such object has no views and is remembered as its floor cell."""
+        episode_id = str(self.arrays.episode_ids[self.arrays.episode[frame]])
+        goal = placed[0]
+        positions = self.geometry.episodes[episode_id].positions
+        if positions:
+            ids = list(positions)
+            gaps = np.linalg.norm(np.asarray([positions[i] for i in ids], np.float64) - goal, axis=1)
+            nearest = int(np.argmin(gaps))
+            if gaps[nearest] <= ON_OBJECT:
+                return CloseLook(ids[nearest], self.views.get((episode_id, ids[nearest]), ()))
+        return CloseLook(("cell", *np.floor(goal[:2] / REMEMBERED_CELL).astype(int).tolist()))
 
     def points(self, frame_id: str) -> FramePoints:
         if frame_id not in self._points:
@@ -124,6 +154,18 @@ class Placements:
         return goal, str(p.roles[keep][int(np.argmin(np.linalg.norm(xyz - goal, axis=1)))])
 
 
+def _approach_views(fs: FrameSet, approach: pd.DataFrame | None) -> dict[tuple[str, str], tuple]:
+    """Per (episode, object), its scored approach views as (distance, score), far to near."""
+    if approach is None or approach.empty:
+        return {}
+    rows = fs.frames.set_index("frame_id").loc[approach.frame_id, ["approach_of", "approach_distance", "step"]]
+    table = pd.DataFrame({"episode_id": approach.episode_id.to_numpy(), "object_id": rows.approach_of.to_numpy(),
+                          "distance": rows.approach_distance.to_numpy(np.float64),
+                          "score": approach.score.to_numpy(np.float64), "step": rows.step.to_numpy()})
+    return {(str(e), str(o)): tuple(zip(group.distance.tolist(), group.score.tolist()))
+            for (e, o), group in table.sort_values("step").groupby(["episode_id", "object_id"], sort=False)}
+
+
 def _cumsum_by_episode(values: np.ndarray, episode: np.ndarray) -> np.ndarray:
     total = np.cumsum(values)
     starts = np.flatnonzero(np.r_[True, np.diff(episode) != 0]) if len(values) else np.zeros(0, np.int64)
@@ -140,9 +182,23 @@ def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
 
 
 def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
-    """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts.
-    The policy decides (``StopPolicy.decide``) with a candidate placeable where its points at the frame's line have
-    depth in range; the agent walks from where it stopped looking to the committed candidate's point."""
+    """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts,
+    and what an approach-verify policy rejected on its way (``walk_decisions``)."""
+    decisions, placed, verify = walk_decisions(places, sigma, policy)
+    rows = []
+    for (start, end), decision in zip(episode_bounds(places.arrays), decisions):
+        row = _episode(places, decision, start, end, placed)
+        if isinstance(policy, ApproachVerify):
+            row |= _rejections(places, policy, decision, placed, verify)  # type: ignore[arg-type]
+        rows.append(row)
+    return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
+
+
+def walk_decisions(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> tuple[
+        list[Decision], dict[int, tuple[np.ndarray, str] | None], Verify | None]:
+    """The policy's decisions on the walks (``StopPolicy.decide``), a candidate placeable where its points at the
+    frame's line have depth in range, an approach-verify policy's close looks read from the approach views
+    (``Placements.close_look``); with the placed candidates and the close looks, for the rows built from them."""
     arr = places.arrays
     line = policy.line(arr, sigma)  # sigma, or the policy's per frame
     placed: dict[int, tuple[np.ndarray, str] | None] = {}
@@ -152,10 +208,26 @@ def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MAT
             placed[frame] = places.place(places.frame_ids[frame], float(line[frame]))
         return placed[frame] is not None
 
-    decisions = policy.decide(arr, sigma, placeable)
-    rows = [_episode(places, decision, start, end, placed)
-            for (start, end), decision in zip(episode_bounds(arr), decisions)]
-    return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
+    verify: Verify | None = None
+    if isinstance(policy, ApproachVerify):
+        def verify(frame: int) -> CloseLook:
+            return places.close_look(frame, placed[frame])  # type: ignore[arg-type]  # a verified candidate is placed
+
+    return policy.decide(arr, sigma, placeable, verify=verify), placed, verify
+
+
+def _rejections(places: Placements, policy: ApproachVerify, decision: Decision,
+                placed: dict[int, tuple[np.ndarray, str] | None], verify: Verify) -> dict:
+    """What the agent walked up to and rejected: how many, of them targets and look-alikes, and each as
+    ``step:what it landed on:close score``."""
+    roles, texts = [], []
+    for _, candidate in decision.rejected:
+        role = placed[candidate][1]  # type: ignore[index]  # a rejected candidate was placed
+        close = policy.close_score(verify(candidate), float(places.arrays.score[candidate]))
+        roles.append(role)
+        texts.append(f"{int(places.steps[candidate])}:{role}:{close:.3f}")
+    return dict(rejected=len(roles), rejected_target=roles.count("target"),
+                rejected_lookalike=roles.count("same_category"), rejections="; ".join(texts) or None)
 
 
 def _episode(places: Placements, decision: Decision, start: int, end: int,
@@ -164,42 +236,37 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
     geometry = places.geometry.episodes[episode_id]
     target_id = places.target[episode_id]
     if decision.chosen is not None:
-        return _stop(places, geometry, episode_id, target_id, decision, placed[decision.chosen])  # type: ignore[arg-type]
+        return _stop(places, geometry, episode_id, target_id, decision, placed)
     last = end - 1
     target = np.asarray(geometry.positions[target_id])
     position = np.r_[places.xy[last], geometry.start.z]  # where it stands when the walk ends, on the floor
+    detour_steps, detour_path = _detours(places, geometry, decision, placed)
     return dict(episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None,
                 stop_step=None, point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None,
                 stand_x=float(position[0]), stand_y=float(position[1]),
-                d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]),
-                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]),
+                d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]) + detour_path,
+                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]) + detour_steps,
                 unplaced_candidates=decision.unplaced,
                 fired_step=None if decision.fired is None else int(places.steps[decision.fired]),
                 candidates=len(decision.candidates))
 
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
-          placed: tuple[np.ndarray, str]) -> dict:
+          placed: dict[int, tuple[np.ndarray, str] | None]) -> dict:
     """The walk from where the agent stopped looking (``decision.stop``) to where it stands beside the committed
-    point: the shortest walk on the episode's floor map (around walls and furniture, ``FloorMap.walk_length``), the
-    straight line without one; the turns counted toward the straight heading."""
+    point (``_walk_to``), after the detours to every candidate it walked up to and rejected."""
     t, source = int(decision.stop), int(decision.chosen)  # type: ignore[arg-type]  # a committed decision
-    point, landed_on = placed
-    stand = standing_point(geometry, point, places.xy[t])
+    point, landed_on = placed[source]  # type: ignore[misc]  # a committed candidate is placed
+    stand, walked, turns = _walk_to(places, geometry, t, point)
     target = np.asarray(geometry.positions[target_id])
     d2g = float(np.linalg.norm(stand - target))
     same = [np.asarray(xyz) for oid, xyz in geometry.positions.items()
             if oid != target_id and places.category[oid] == places.category[target_id]]
     near_same = any(np.linalg.norm(stand - xyz) <= SUCCESS_DISTANCE for xyz in same)
     outcome = "success" if d2g <= SUCCESS_DISTANCE else "category error" if near_same else "other stop"
-    ahead = stand[:2] - places.xy[t]
-    distance = float(np.hypot(*ahead))
-    heading = math.atan2(ahead[1], ahead[0]) if distance > 1e-9 else float(places.yaw[t])
-    turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
-    turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
-    walked = distance if geometry.floor_map is None else geometry.floor_map.walk_length(places.xy[t], stand[:2])
-    steps = int(places.steps[t]) + turns + math.ceil(walked / FORWARD_STEP) + 1
-    path = float(places.walked[t]) + walked
+    detour_steps, detour_path = _detours(places, geometry, decision, placed)
+    steps = int(places.steps[t]) + detour_steps + turns + math.ceil(walked / FORWARD_STEP) + 1
+    path = float(places.walked[t]) + detour_path + walked
     geodesic = geometry.geodesic_distance
     spl = float(outcome == "success") * geodesic / max(path, geodesic) if max(path, geodesic) > 0 else 0.0
     return dict(episode_id=episode_id, target_object_id=target_id, outcome=outcome,
@@ -210,6 +277,33 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
                 steps=steps, unplaced_candidates=decision.unplaced,
                 fired_step=int(places.steps[int(decision.fired)]),
                 candidates=len(decision.candidates))
+
+
+def _walk_to(places: Placements, geometry: EpisodeGeometry, t: int, point: np.ndarray) -> tuple[np.ndarray, float,
+                                                                                                  int]:
+    """From where the agent stands at frame ``t`` to where it stands beside ``point``: the standing point, the
+    metres walked (the shortest walk on the episode's floor map, around walls and furniture, ``FloorMap.walk_length``;
+    the straight line without one) and the turns toward the straight heading."""
+    stand = standing_point(geometry, point, places.xy[t])
+    ahead = stand[:2] - places.xy[t]
+    distance = float(np.hypot(*ahead))
+    heading = math.atan2(ahead[1], ahead[0]) if distance > 1e-9 else float(places.yaw[t])
+    turn = abs((heading - places.yaw[t] + math.pi) % (2 * math.pi) - math.pi)
+    turns = max(0, math.ceil((turn - TURN / 2) / TURN - 1e-9))  # until the point is within half a turn of the heading
+    walked = distance if geometry.floor_map is None else geometry.floor_map.walk_length(places.xy[t], stand[:2])
+    return stand, walked, turns
+
+
+def _detours(places: Placements, geometry: EpisodeGeometry, decision: Decision,
+             placed: dict[int, tuple[np.ndarray, str] | None]) -> tuple[int, float]:
+    """Steps and metres of the round trips to the candidates the agent walked up to and rejected: to each and back
+    to where it left its walk, turning about (``ABOUT_FACE``) in between."""
+    steps, path = 0, 0.0
+    for left_at, candidate in decision.rejected:
+        _, walked, turns = _walk_to(places, geometry, left_at, placed[candidate][0])  # type: ignore[index]
+        steps += turns + 2 * math.ceil(walked / FORWARD_STEP) + ABOUT_FACE
+        path += 2 * walked
+    return steps, path
 
 
 def standing_point(geometry: EpisodeGeometry, goal: np.ndarray, eye_xy: np.ndarray) -> np.ndarray:
@@ -228,8 +322,10 @@ def standing_point(geometry: EpisodeGeometry, goal: np.ndarray, eye_xy: np.ndarr
 
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
-    """SR, SPL, CE (% of episodes), D2G (metres), Steps, and the shares not found and with an unplaced candidate,
-    each episode counted ``weights`` times (None: once)."""
+    """SR, SPL, CE (% of episodes), D2G (metres), Steps, the shares not found and with an unplaced candidate, and of
+    an approach-verify policy the candidates rejected per episode and the % of them that were the target or a
+    look-alike (NaN where none was rejected; these three only for an approach-verify policy's rows), each episode
+    counted ``weights`` times (None: once)."""
     w = np.ones(len(episodes)) if weights is None else np.asarray(weights, np.float64)
     total = w.sum()
     if not total:
@@ -239,10 +335,20 @@ def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dic
         return float(np.dot(w, np.asarray(values, np.float64)) / total)
 
     outcome = episodes["outcome"]
-    return dict(sr=100 * mean(outcome == "success"), spl=100 * mean(episodes["spl"]),
-                ce=100 * mean(outcome == "category error"), d2g=mean(episodes["d2g"]), steps=mean(episodes["steps"]),
-                not_found_pct=100 * mean(outcome == "not found"),
-                unplaced_pct=100 * mean(episodes["unplaced_candidates"] > 0))
+    rejected = np.dot(w, episodes["rejected"].fillna(0).to_numpy(np.float64))
+
+    def rejected_share(column: str) -> float:
+        return float(100 * np.dot(w, episodes[column].fillna(0).to_numpy(np.float64)) / rejected) if rejected \
+            else math.nan
+
+    out = dict(sr=100 * mean(outcome == "success"), spl=100 * mean(episodes["spl"]),
+               ce=100 * mean(outcome == "category error"), d2g=mean(episodes["d2g"]), steps=mean(episodes["steps"]),
+               not_found_pct=100 * mean(outcome == "not found"),
+               unplaced_pct=100 * mean(episodes["unplaced_candidates"] > 0))
+    if episodes["rejected"].notna().any():  # an approach-verify policy's rows
+        out |= dict(rejections=float(rejected / total), rejected_target_pct=rejected_share("rejected_target"),
+                    rejected_lookalike_pct=rejected_share("rejected_lookalike"))
+    return out
 
 
 def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,
@@ -256,7 +362,7 @@ def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,
 def navigation_sweep(places: Placements, sigmas: np.ndarray, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
     """``metrics_of`` at each sigma (ascending): the curve the plots draw and the SR objective reads."""
     rows = [{"sigma": float(s), **metrics_of(episodes_at(places, float(s), policy))} for s in sigmas]
-    return pd.DataFrame(rows, columns=["sigma", *NAVIGATION_KEYS, *SHARE_KEYS])
+    return pd.DataFrame(rows, columns=["sigma", *NAVIGATION_KEYS, *SHARE_KEYS, *REJECTION_KEYS])
 
 
 MAX_SWEEP_SIGMAS = 200  # a navigation curve places each episode's stop anew per sigma: quantiles beyond this many

@@ -20,7 +20,14 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.commits import policy_metrics
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, Scored, as_arrays, threshold_metrics, to_python
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, fired_arrays, found_frames, gated_scores
+from pin_match.evaluation.core.stop import (
+    FIRST_MATCH,
+    ApproachVerify,
+    StopPolicy,
+    fired_arrays,
+    found_frames,
+    gated_scores,
+)
 from pin_match.evaluation.core.sweep import sweep
 from pin_match.evaluation.core.tuning import (
     DEFAULT_MATCH_FLOOR,
@@ -32,6 +39,7 @@ from pin_match.evaluation.core.tuning import (
 from pin_match.scoring.table import ScoreTable
 
 MAX_CANDIDATES = 2000  # sigmas tried where one sweep cannot serve: every distinct score, or this many quantiles
+SECOND_LINES = np.linspace(0.05, 0.95, 10)  # quantiles of the approach views' scores tried as an approach's second line
 
 
 def policy_sweep(scored: Scored, policy: StopPolicy) -> pd.DataFrame:
@@ -63,16 +71,35 @@ def policy_sigma(scored: Scored, policy: StopPolicy = FIRST_MATCH, objective: st
 def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: str = DEFAULT_OBJECTIVE,
                 split: str = "train", match_floor: float = DEFAULT_MATCH_FLOOR) -> dict:
     """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics (for a
-    navigation objective, of the navigation estimate under the policy)."""
+    navigation objective, of the navigation estimate under the policy). An approach-verify policy without a second
+    line of its own (``approach:D``) has both tuned: sigma for each second line tried (sigma itself, then
+    ``SECOND_LINES`` of the split's approach-view scores), the best pair kept (the earlier among equals) and its
+    ``policy`` written with the line it chose."""
     ctx = EvalContext.of(fs)
     arr = ctx.arrays(table, split)
     navigation = objective in OBJECTIVES and OBJECTIVES[objective].navigation
-    curve = objective_curve(ctx, table, split, objective, policy) if navigation else policy_sweep(arr, policy)
-    index, value = choose_sigma(curve, objective, match_floor)
-    sigma = float(curve["sigma"].iloc[index])
+    best = None
+    for candidate in _second_lines(ctx, table, split, policy):
+        curve = objective_curve(ctx, table, split, objective, candidate) if navigation else \
+            policy_sweep(arr, candidate)
+        index, value = choose_sigma(curve, objective, match_floor)
+        if best is None or value > best[2]:
+            best = (candidate, float(curve["sigma"].iloc[index]), value, len(curve))
+    policy, sigma, value, n_candidates = best  # type: ignore[misc]  # one candidate at least
     return dict(matcher=table.matcher, matcher_id=table.matcher_id, config_hash=table.meta.get("config_hash"),
                 sigma=sigma, policy=str(policy), objective=objective, objective_value=value, split=split,
                 frameset_fingerprint=table.meta.get("frameset_fingerprint"), n_frames=len(arr.score),
-                n_candidates=len(curve),
+                n_candidates=n_candidates,
                 metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(arr, sigma, policy).items()},
                 date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
+
+
+def _second_lines(ctx: EvalContext, table: ScoreTable, split: str, policy: StopPolicy) -> list[StopPolicy]:
+    """The policies ``tune_policy`` tries: ``policy`` itself, and for an approach without a second line each of
+    ``SECOND_LINES`` (quantiles of the split's approach-view scores, of its walk's where it has none)."""
+    if not isinstance(policy, ApproachVerify) or policy.sigma2 is not None:
+        return [policy]
+    views = ctx.approach_scored(table, split)["score"].to_numpy(np.float64)
+    scores = views if len(views) else ctx.arrays(table, split).score
+    lines = np.unique(np.quantile(scores, SECOND_LINES))
+    return [policy, *(replace(policy, sigma2=float(line)) for line in lines)]

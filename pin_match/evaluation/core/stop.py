@@ -28,7 +28,7 @@ from __future__ import annotations
 import bisect
 import math
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -41,11 +41,27 @@ class PolicyError(PinMatchError, ValueError):
     """A stop policy that does not make sense."""
 
 
-POLICY_SYNTAX = ("K-of-N (e.g. 2-of-3), house:topT+MARGIN (e.g. house:top3+0.1) or look:W[+CLEAR] / look:rest "
-                 "(e.g. look:20, look:20+0.1; look:rest is the upper bound)")
+POLICY_SYNTAX = ("K-of-N (e.g. 2-of-3), house:topT+MARGIN (e.g. house:top3+0.1), look:W[+CLEAR] / look:rest "
+                 "(e.g. look:20, look:20+0.1; look:rest is the upper bound) or approach:D[+SIGMA2] (e.g. approach:1, "
+                 "approach:1+0.6)")
 UPPER_BOUND = " (upper bound)"  # the text of a policy that reads where the recording ends says so wherever it is shown
 
 Placeable = Callable[[int], bool]  # can the candidate of this frame (an index into the arrays) be placed?
+
+
+@dataclass(frozen=True)
+class CloseLook:
+    """A candidate as an agent that walks up to it meets it: what it remembers of it if it rejects it (``key``: the
+    object, or the goal's floor cell, known from where the goal was placed), so a later firing on the same thing is not
+    proposed again, and each view on its way as (distance in metres from the candidate, score). No views: nothing was
+    seen from close by (a candidate on nothing the frame-set has approach views of), so the candidate's own frame
+    stands for them; None: the agent has not reached it yet (live)."""
+
+    key: Hashable
+    views: tuple[tuple[float, float], ...] | None = ()
+
+
+Verify = Callable[[int], CloseLook]  # frame i's candidate as the agent meets it when it walks up to it
 
 
 @dataclass(frozen=True)
@@ -63,6 +79,9 @@ class Decision:
     chosen: int | None
     candidates: tuple[int, ...] = ()
     unplaced: int = 0
+    rejected: tuple[tuple[int, int], ...] = ()  # (frame it left the walk at, candidate) of each candidate an
+    # approach-verify policy walked up to and rejected, in walk order
+    approaching: int | None = None  # the candidate it walks up to now, not reached yet (live only)
 
 
 @dataclass(frozen=True)
@@ -86,6 +105,8 @@ class StopPolicy:
             return HouseStop.parse(text)
         if text.strip().startswith("look:"):
             return LookFurther.parse(text)
+        if text.strip().startswith("approach:"):
+            return ApproachVerify.parse(text)
         found = re.fullmatch(r"\s*(\d+)\s*-?of-?\s*(\d+)\s*", text)
         if not found:
             raise PolicyError(f"stop policy {text!r}: write it as {POLICY_SYNTAX}")
@@ -136,19 +157,21 @@ class StopPolicy:
         return self.fires(arr, sigma)
 
     def decide(self, arr: FrameArrays, sigma: float, placeable: Placeable | None = None,
-               level: np.ndarray | None = None) -> list[Decision]:
+               level: np.ndarray | None = None, verify: Verify | None = None) -> list[Decision]:
         """One ``Decision`` per episode (in ``arr``'s order). ``placeable(i)``: can frame i's candidate be placed in
         the house (None: every one can, as without geometry)? A firing whose candidate cannot is passed over.
-        ``level``: as for ``line``. The frames may be a whole recording or an agent's walk so far: the decision
-        reads nothing after the frame where it commits, and a window that reaches past the last frame is still open
-        (no commit, ``fired`` set)."""
+        ``level``: as for ``line``. ``verify(i)``: frame i's candidate seen from close by, which only an
+        approach-verify policy reads (None: no views, each candidate's own frame stands for its close look). The
+        frames may be a whole recording or an agent's walk so far: the decision reads nothing after the frame where it
+        commits, and a window that reaches past the last frame is still open (no commit, ``fired`` set)."""
         counted = arr.score >= self.line(arr, sigma, level)
         fired = self._window_fires(arr, counted)
         source = latest_counted(arr, counted)
-        return [self._decide(arr.score, fired, source, (start, end), placeable) for start, end in episode_bounds(arr)]
+        return [self._decide(arr.score, fired, source, (start, end), placeable, sigma, verify)
+                for start, end in episode_bounds(arr)]
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
-                placeable: Placeable | None) -> Decision:
+                placeable: Placeable | None, sigma: float = math.nan, verify: Verify | None = None) -> Decision:
         """The first firing of frames ``start:end`` whose candidate can be placed; the agent commits there."""
         start, end = bounds
         passed, last_passed = 0, -1
@@ -251,16 +274,10 @@ class LookFurther(StopPolicy):
     def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
         """The frame it commits to and, as PIN's rule counts every frame where it fires, every firing after the frame
         where it committed (the candidates it passed over are not found): ``window=0`` is the base rule exactly."""
-        fires = self.fires(arr, sigma)
-        mask = np.zeros(len(arr.score), bool)
-        for (_, end), d in zip(episode_bounds(arr), self.decide(arr, sigma)):
-            if d.chosen is not None:
-                mask[d.chosen] = True
-                mask[d.stop + 1:end] = fires[d.stop + 1:end]  # type: ignore[operator]  # a commit has a stop
-        return mask
+        return committed_found(self, arr, sigma)
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
-                placeable: Placeable | None) -> Decision:
+                placeable: Placeable | None, sigma: float = math.nan, verify: Verify | None = None) -> Decision:
         first = super()._decide(scores, fired, source, bounds, placeable)
         if first.fired is None:
             return first
@@ -278,6 +295,106 @@ class LookFurther(StopPolicy):
         if last > end - 1:  # the window reaches past the walk's last frame: still looking when the walk ends
             return Decision(first.fired, None, None, _ints(seen[kept]), unplaced)
         return Decision(first.fired, last, int(seen[kept][np.argmax(scores[seen[kept]])]), _ints(seen[kept]), unplaced)
+
+
+@dataclass(frozen=True)
+class ApproachVerify(StopPolicy):
+    """Walk up and check before stopping (IEVE's verify, UniGoal's blacklist): at a firing (a placeable candidate)
+    the agent leaves its walk for the candidate, looks at it again from within ``distance`` metres on its way, and
+    commits there if the best of those views reaches the second line, ``sigma2`` (None: sigma itself). Otherwise it
+    rejects the candidate, remembers it (``CloseLook.key``: a later firing on the same thing is passed over), walks
+    back and resumes its walk at the next frame. Where no view came within ``distance``, the nearest one stands for
+    them (the agent got no closer); where there is no view at all (``verify`` None, or a candidate on nothing the
+    frame-set has approach views of) the candidate's own frame does. Every step of the detours counts
+    (``navigation``). Nothing of the walk after the frame where it commits is read, nor any view of a candidate it
+    did not walk up to."""
+
+    distance: float = field(default=1.0, kw_only=True)
+    sigma2: float | None = field(default=None, kw_only=True)
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if not (math.isfinite(self.distance) and self.distance > 0):
+            raise PolicyError(f"stop policy {self}: need a finite approach distance above 0 metres")
+        if self.sigma2 is not None and not math.isfinite(self.sigma2):
+            raise PolicyError(f"stop policy {self}: need a finite second line")
+
+    def __str__(self) -> str:
+        distance = repr(float(self.distance)).removesuffix(".0")
+        return f"approach:{distance}{'' if self.sigma2 is None else _signed(self.sigma2)}{_base_suffix(self)}"
+
+    @classmethod
+    def parse(cls, text: str) -> ApproachVerify:
+        number = r"\d*\.?\d+(?:e[+-]?\d+)?"
+        found = re.fullmatch(rf"\s*approach:({number})([+-]{number})?(?:@(\d+)-of-(\d+))?\s*", text)
+        if not found:
+            raise PolicyError(f"stop policy {text!r}: write an approach-verify one as approach:D (walk up to a "
+                              "candidate, commit where a view within D metres reaches sigma, e.g. approach:1) or "
+                              "approach:D+SIGMA2 (a second line of its own, e.g. approach:1+0.6, approach:1-0.2); "
+                              "optionally @K-of-N")
+        k, n = _base_window(found, 3)
+        return cls(k, n, distance=float(found.group(1)),
+                   sigma2=None if found.group(2) is None else float(found.group(2)))
+
+    @property
+    def one_sweep(self) -> bool:
+        return False
+
+    def second_line(self, sigma: float) -> float:
+        return sigma if self.sigma2 is None else self.sigma2
+
+    def close_score(self, look: CloseLook, own: float) -> float:
+        """The score the agent verifies a candidate on: the best view within ``distance``, else the nearest view,
+        else the candidate's own frame (``own``)."""
+        if not look.views:  # None (not reached) never gets here: ``_decide`` waits for the views
+            return own
+        near = [score for d, score in look.views if d <= self.distance]
+        return max(near) if near else min(look.views)[1]
+
+    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
+        """The frame whose candidate it commits to and every firing after the commit (as ``LookFurther.found``)."""
+        return committed_found(self, arr, sigma)
+
+    def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
+                placeable: Placeable | None, sigma: float = math.nan, verify: Verify | None = None) -> Decision:
+        start, end = bounds
+        first: int | None = None
+        candidates: list[int] = []
+        rejected: list[tuple[int, int]] = []
+        remembered: set = set()
+        passed, last = 0, -1
+        for t in np.flatnonzero(fired[start:end]) + start:
+            candidate = int(source[t])
+            if candidate == last:  # this firing stands for the candidate just weighed or passed over
+                continue
+            last = candidate
+            if placeable is not None and not placeable(candidate):
+                passed += 1
+                continue
+            look = CloseLook(candidate) if verify is None else verify(candidate)
+            if look.key in remembered:  # a thing it rejected before: not proposed again
+                continue
+            first = int(t) if first is None else first
+            candidates.append(candidate)
+            if look.views is None:  # live: the agent walks up to it now
+                return Decision(first, None, None, tuple(candidates), passed, tuple(rejected), candidate)
+            if self.close_score(look, float(scores[candidate])) >= self.second_line(sigma):
+                return Decision(first, int(t), candidate, tuple(candidates), passed, tuple(rejected))
+            rejected.append((int(t), candidate))
+            remembered.add(look.key)
+        return Decision(first, None, None, tuple(candidates), passed, tuple(rejected))
+
+
+def committed_found(policy: StopPolicy, arr: FrameArrays, sigma: float) -> np.ndarray:
+    """The frame a policy commits to and, as PIN's rule counts every frame where it fires, every firing after the frame
+    where it committed (the candidates it passed over or rejected are not found)."""
+    fires = policy.fires(arr, sigma)
+    mask = np.zeros(len(arr.score), bool)
+    for (_, end), d in zip(episode_bounds(arr), policy.decide(arr, sigma)):
+        if d.chosen is not None:
+            mask[d.chosen] = True
+            mask[d.stop + 1:end] = fires[d.stop + 1:end]  # type: ignore[operator]  # a commit has a stop
+    return mask
 
 
 def _window_candidates(fired: np.ndarray, source: np.ndarray, window: tuple[int, int],
@@ -332,6 +449,11 @@ def describe(policy: StopPolicy) -> str:
         base = "PIN's first match" if (policy.k, policy.n) == (1, 1) else f"{policy.k} of {policy.n} frames"
         return (f"{policy}: after its first firing at sigma ({base}) it looks {window}, then commits to the best "
                 f"candidate{clear}")
+    if isinstance(policy, ApproachVerify):
+        second = "sigma" if policy.sigma2 is None else f"{policy.sigma2:g}"
+        return (f"{policy}: at a firing at sigma it walks up to the candidate and commits where a view within "
+                f"{policy.distance:g} m reaches {second}; else it rejects the candidate, remembers it, walks back and "
+                "walks on (every step of the detours counted)")
     if policy == FIRST_MATCH:
         return "first match at sigma (1-of-1)"
     return str(policy)

@@ -21,7 +21,7 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.commits import commit_metrics, commitments
 from pin_match.evaluation.core.evaluator import EvalContext
-from pin_match.evaluation.core.navigation import episodes_at, navigation_metrics
+from pin_match.evaluation.core.navigation import episodes_at, navigation_metrics, walk_decisions
 from pin_match.evaluation.core.policies import tune_policy
 from pin_match.evaluation.core.stop import LookFurther, StopPolicy
 from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE
@@ -30,7 +30,7 @@ from pin_match.scoring.table import ScoreTable
 
 DEFAULT_WINDOWS = ("look:0", "look:10", "look:20", "look:40", "look:rest")
 TRADE_KEYS = ("sr", "ce", "spl", "d2g", "steps", "not_found_pct", "commit_target_pct", "commit_lookalike_pct",
-              "still_looking_pct", "frames_looked_at")
+              "still_looking_pct", "frames_looked_at", "rejections", "rejected_target_pct", "rejected_lookalike_pct")
 
 
 def default_objective(fs: FrameSet) -> str:
@@ -52,9 +52,11 @@ def trade(ctx: EvalContext, tables: Mapping[str, ScoreTable], policies: Sequence
     objective = objective or default_objective(ctx.fs)
     for name, table in tables.items():
         for policy in policies:
-            sigma = float(tune_policy(table, ctx, policy, objective=objective, split=tune_split)["sigma"])
-            committed = commit_metrics(commitments(ctx.arrays(table, read_split), sigma, policy), ctx.clusters,
-                                       ctx.boot)
+            tuned = tune_policy(table, ctx, policy, objective=objective, split=tune_split)
+            sigma, policy = float(tuned["sigma"]), StopPolicy.parse(tuned["policy"])  # an approach's line is tuned too
+            decisions = walk_decisions(ctx.placements(table, read_split), sigma, policy)[0] if geometry else None
+            committed = commit_metrics(commitments(ctx.arrays(table, read_split), sigma, policy, decisions),
+                                       ctx.clusters, ctx.boot)
             metrics, ci = dict(committed["metrics"]), dict(committed["ci95"])
             if geometry:
                 walks = navigation_metrics(episodes_at(ctx.placements(table, read_split), sigma, policy),

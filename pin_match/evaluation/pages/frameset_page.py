@@ -57,8 +57,10 @@ def counts(fs: FrameSet, labels: pd.DataFrame | None = None) -> pd.DataFrame:
 
 
 def role_labels(fs: FrameSet) -> pd.DataFrame:
-    """``frame_labels`` with each frame's role: built once per page."""
-    return frame_labels(fs).assign(role=lambda d: frame_roles(d))
+    """``frame_labels`` of the walks' frames (approach views are not counted) with each frame's role: built once per
+    page."""
+    labels = frame_labels(fs)
+    return labels[~labels["approach"]].assign(role=lambda d: frame_roles(d))
 
 
 LARGE_PX = 2000  # a target this large is one an instance matcher can be asked to recognise

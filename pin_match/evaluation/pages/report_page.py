@@ -115,7 +115,7 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
     if walks is None:
         return [*parts, html.paragraph(f"Not estimated: {nav['missing']}.", "note")]
     m, ci = evaluation.result["metrics"], evaluation.result["ci95"]
-    lines = [f"{name} {_value(m.get(key))}{_interval(ci.get(key))}" for key, name in NAVIGATION_NAMES]
+    lines = [f"{name} {_value(m.get(key))}{_interval(ci.get(key))}" for key, name in NAVIGATION_NAMES if key in m]
     parts += [html.paragraph("The recorded walk is followed until the policy (" + nav["policy"] + ") commits to a "
                              "frame whose matched points have depth in PIN's 0.5-5 m; their median is the goal. The "
                              "agent then walks from where it committed toward the goal and stands on the floor nearest "
@@ -128,14 +128,17 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
     figures = []
     for _, w in walks.iterrows():
         caption = [f"episode {w.episode_id}: {w.outcome}", f"target {w.target_object_id}"]
+        if isinstance(w.rejections, str):  # an approach-verify policy walked up to these and rejected them
+            caption.append(f"walked up to and rejected (step:point on:close score): {w.rejections}")
         if w.outcome == "not found":
             never = "never stopped" if pd.isna(w.fired_step) else \
+                "rejected every candidate it walked up to" if w.rejected == w.candidates else \
                 f"still looking: the window opened at step {w.fired_step:.0f} ran past the walk's end"
             figures.append(html.figure([], [*caption, f"{never}; walk's end {w.d2g:.2f} m from the target",
                                             f"{w.unplaced_candidates} candidates without depth in range"], "miss"))
             continue
         image = frame_image(assets, fs, w.point_frame_id, frame_points(table, w.point_frame_id, sigma))
-        looked = "" if w.fired_step == w.stop_step else \
+        looked = "" if w.fired_step == w.stop_step or isinstance(w.rejections, str) else \
             f"fired at step {w.fired_step}, looked on to step {w.stop_step} ({w.candidates} candidates), "
         caption += [f"{looked}stop at step {w.stop_step}, goal from frame {w.point_frame_id}",
                     f"point on: {w.landed_on}, {w.d2g:.2f} m from the target", f"{w.steps} steps, SPL {w.spl:.2f}"]
@@ -144,7 +147,9 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
 
 
 NAVIGATION_NAMES = (("sr", "SR %"), ("spl", "SPL %"), ("ce", "CE %"), ("d2g", "D2G m"), ("steps", "Steps"),
-                    ("not_found_pct", "not found %"), ("unplaced_pct", "a candidate without depth %"))
+                    ("not_found_pct", "not found %"), ("unplaced_pct", "a candidate without depth %"),
+                    ("rejections", "rejected per episode"), ("rejected_target_pct", "of them the target %"),
+                    ("rejected_lookalike_pct", "of them a look-alike %"))
 
 
 def _value(v: float | None) -> str:
