@@ -134,6 +134,33 @@ def approach_set(tmp_path_factory):
     return w.close()
 
 
+def test_approach_views_are_frames_of_their_own_kind_in_the_fingerprint(approach_set, tmp_path):
+    import shutil
+
+    import pandas as pd
+
+    from pin_match.data.frameset import FrameSet
+
+    views = approach_set.approach_views
+    assert views.step.tolist() == [4, 5, 6, 7] and views.approach_of.tolist() == [v[0] for v in VIEWS]
+    assert views.approach_distance.tolist() == [v[3] for v in VIEWS]
+    root = tmp_path / "copy"
+    shutil.copytree(approach_set.root, root)
+    rows = pd.read_parquet(root / "frames.parquet")
+    rows.loc[rows.step == 7, "approach_of"] = "mug_l"  # the last view now said to be of the look-alike
+    rows.to_parquet(root / "frames.parquet")
+    assert FrameSet.load(root).fingerprint != approach_set.fingerprint
+
+
+def test_the_writer_refuses_an_approach_view_without_a_distance(tmp_path):
+    from pin_match.data.frameset import FrameSetError
+    from pin_match.data.writer import Frame, encode_frame
+
+    frame = Frame(np.zeros((4, 4, 3), np.uint8), np.zeros((4, 4), np.uint16), {}, approach=("mug_t", -1.0))
+    with pytest.raises(FrameSetError, match=r"frame e_0003: approach \('mug_t', -1.0\) is not"):
+        encode_frame(tmp_path, "e", 3, frame)
+
+
 def approach_table(fs, walk_scores, view_scores):
     import pandas as pd
 

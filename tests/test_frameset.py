@@ -75,6 +75,18 @@ def _set_first_cell(path, column, value):
     rows.to_parquet(path)
 
 
+def _approach_first(root, object_id, distance, columns=("approach_of", "approach_distance")):
+    """Make the first frame an approach view of ``object_id`` (None: its episode's target) at ``distance``."""
+    rows = pd.read_parquet(root / "frames.parquet")
+    episodes = {e["episode_id"]: e for e in json.loads((root / "episodes.json").read_text())["episodes"]}
+    target = episodes[rows.episode_id[0]]["goals"][0]["object_id"]
+    values = {"approach_of": object_id or target, "approach_distance": distance}
+    for column in columns:
+        rows[column] = pd.Series([values[column]] + [None] * (len(rows) - 1), dtype=object if column ==
+                                 "approach_of" else float)
+    rows.to_parquet(root / "frames.parquet")
+
+
 # each damage done to a copy of the tiny frame-set, and the error that must name it
 DAMAGES = {
     "missing manifest": (lambda root: (root / MANIFEST).unlink(), r"missing file .*frameset\.json"),
@@ -94,6 +106,13 @@ DAMAGES = {
                                   r"unknown episode id 'ep_nowhere'"),
     "unknown frame in visibility": (lambda root: _set_first_cell(root / "visibility.parquet", "frame_id", "nope_0000"),
                                     r"unknown frame id 'nope_0000'"),
+    "approach view of an object not in its episode": (
+        lambda root: _approach_first(root, "ball_b", 1.0),
+        r"frame 'ep_train_0000' is an approach view of 'ball_b', which is not an object of its episode 'ep_train'"),
+    "approach distance not finite": (lambda root: _approach_first(root, None, float("nan")),
+                                     r"frame 'ep_train_0000' has approach_distance nan, not a finite distance"),
+    "approach view without its distance": (lambda root: _approach_first(root, None, 1.0, ("approach_of",)),
+                                           r"approach views need both columns 'approach_of' and 'approach_distance'"),
     "missing frame file": (lambda root: (root / "frames" / "ep_val" / "0002.jpg").unlink(),
                            r"frame 'ep_val_0002': missing image file .*0002\.jpg"),
 }

@@ -491,8 +491,9 @@ def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
 def test_oracles_on_the_default_set(default_synth):
     """Matching the target wherever it shows succeeds in every episode whose walk shows it large (1,000 px: near, so
     its point has depth) and in none whose walk never shows it: the exploration does not know the target, so the
-    oracle's SR is what the walks see, not 100 % (generator 7's and 8's val split: 7 of 15). Matching its look-alikes instead
-    is never a success (they stand more than 2 m from it) and a category error wherever one shows large."""
+    oracle's SR is what the walks see, not 100 % (generator 7's and 8's val split: 7 of 15). Matching its
+    look-alikes instead is never a success (they stand more than 2 m from it) and a category error wherever one
+    shows large."""
     ctx = EvalContext(default_synth)
     sigma = 1e-9  # any pixel of the object
     val = default_synth.split("val")
