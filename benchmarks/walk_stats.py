@@ -1,10 +1,11 @@
 """What a synthetic set's walks are like: ``python -m benchmarks.walk_stats FRAMESET [--split val]``.
 
-Per split: frames per episode and rendered per episode (a house's walk rendered once for its
-episodes), the start-to-target geodesic, the share of episodes starting in another room than the
-target, and, over the episodes whose target is seen at ``SEEN_PX`` pixels or more, the share where a
-same-family look-alike is first seen so before the target and where the target is first seen in the
-first half of the walk (issue 64's checks; docs/synthetic.md).
+Per split: frames of the walk per episode, approach views per episode (what an agent sees walking
+up to each object, after the walk), and frames rendered per episode (a house's walk and approach
+views rendered once for its episodes), the start-to-target geodesic, the share of episodes starting
+in another room than the target, and, over the episodes whose target is seen at ``SEEN_PX`` pixels
+or more, the share where a same-family look-alike is first seen so before the target and where the
+target is first seen in the first half of the walk (issue 64's checks; docs/synthetic.md).
 """
 
 from __future__ import annotations
@@ -21,8 +22,9 @@ SEEN_PX = 1000
 
 
 def first_seen(fs: FrameSet, episode_id: str, role: str) -> int | None:
-    """The first step of the episode where an object of ``role`` shows ``SEEN_PX`` pixels or more."""
-    vis = fs.visibility[(fs.visibility.role == role) & (fs.visibility.pixels >= SEEN_PX)]
+    """The first step of the episode's walk where an object of ``role`` shows ``SEEN_PX`` pixels or more."""
+    vis = fs.visibility[(fs.visibility.role == role) & (fs.visibility.pixels >= SEEN_PX)
+                        & ~fs.visibility.frame_id.isin(fs.approach_views.frame_id)]
     steps = fs.frames.set_index("frame_id").loc[vis.frame_id, ["episode_id", "step"]]
     steps = steps[steps.episode_id == episode_id].step
     return int(steps.min()) if len(steps) else None
@@ -56,7 +58,9 @@ def rendered(fs: FrameSet, per_episode) -> int:
 
 
 def stats(fs: FrameSet) -> dict:
-    per_episode = fs.frames.groupby("episode_id").size()
+    views = fs.approach_views
+    per_episode = fs.frames[~fs.frames.frame_id.isin(views.frame_id)].groupby("episode_id").size()
+    approach = views.groupby("episode_id").size().reindex(per_episode.index, fill_value=0)
     houses = fs.episodes.groupby("scene_id").size()
     geodesic = np.array([fs.geometry.episodes[e].geodesic_distance for e in fs.episodes.episode_id])
     rooms = rooms_of(fs)
@@ -69,9 +73,9 @@ def stats(fs: FrameSet) -> dict:
         lookalike = first_seen(fs, episode_id, "same_category")
         lookalike_first += lookalike is not None and lookalike < target
         early += target < frames / 2
-    return dict(episodes=len(per_episode), houses=len(houses), frames=int(per_episode.sum()),
-                frames_per_episode=float(per_episode.mean()),
-                rendered_per_episode=rendered(fs, per_episode) / len(per_episode),
+    return dict(episodes=len(per_episode), houses=len(houses), frames=int(per_episode.sum() + approach.sum()),
+                frames_per_episode=float(per_episode.mean()), approach_views_per_episode=float(approach.mean()),
+                rendered_per_episode=rendered(fs, per_episode + approach) / len(per_episode),
                 geodesic_min_median_max=[float(geodesic.min()), float(np.median(geodesic)), float(geodesic.max())],
                 other_room_pct=100 * float(np.mean([a != b for a, b in rooms.values()])),
                 target_seen=seen, lookalike_first_pct=100 * lookalike_first / max(seen, 1),

@@ -219,3 +219,43 @@ def test_a_candidate_with_no_approach_views_is_judged_on_its_own_frame(approach_
     row = episodes_at(places, 0.5, ApproachVerify(distance=1.0, sigma2=0.75)).iloc[0]
     assert row.outcome == "not found" and row.rejected == 1 and row.rejections == "1:other:0.700"
     assert row.steps == 3 + 0 + 2 * forward + 6
+
+
+def test_a_pin_recording_keeps_its_approach_views_and_the_decision(approach_set, tmp_path):
+    """The walk and its approach views recorded as PIN's agent would (``FrameRecorder.record(..., approach=)``) and
+    imported: the same approach views, and the approach-verify policy rejects and commits as on the set itself."""
+    from test_navigation import agent_sensors, pin_episode
+
+    from pin_match.data.importer import import_recording
+    from pin_match.evaluation import EvalContext
+    from pin_match.evaluation.core.navigation import episodes_at
+    from pin_match.pin_agent import FrameRecorder
+    from pin_match.pin_agent.recorder import RecordingError
+
+    codes = {"target": 100000, "same_category": 100001, "other": 100002}
+    views = approach_set.approach_views.set_index("frame_id")
+    record = approach_set.episode_records[0]
+    start = approach_set.geometry.episodes[record["episode_id"]].start
+    recorder = FrameRecorder(tmp_path / "rec", hfov_deg=90.0, camera_height=HEIGHT)
+    with recorder.episode(pin_episode(approach_set, record)):
+        for fid in approach_set.frames.sort_values("step").frame_id:
+            sensors, pitch = agent_sensors(approach_set, fid, start)
+            role = approach_set.visibility[approach_set.visibility.frame_id == fid].role.iloc[0]
+            semantic = np.where(approach_set.instance_mask(fid) == 1, codes[role], 0).astype(np.int32)
+            approach = (views.loc[fid].approach_of, float(views.loc[fid].approach_distance)) \
+                if fid in views.index else None
+            with pytest.raises(RecordingError, match="approach .* must be \\(an object of the episode"):
+                recorder.record(dict(rgb=approach_set.image(fid), semantic=semantic, **sensors), camera_pitch=pitch,
+                                approach=("nobody", 1.0))
+            recorder.record(dict(rgb=approach_set.image(fid), semantic=semantic, depth=approach_set.depth(fid),
+                                 **sensors), camera_pitch=pitch, approach=approach)
+    imported = import_recording(tmp_path / "rec", approach_set.root, tmp_path / "imported")
+    columns = ["step", "approach_of", "approach_distance"]
+    assert imported.approach_views[columns].reset_index(drop=True).equals(views[columns].reset_index(drop=True))
+    policy = ApproachVerify(distance=1.0, sigma2=0.6)
+    scores = [0.9, 0.0, 0.9, 0.2], [0.8, 0.3, 0.4, 0.85]
+    want, got = (episodes_at(EvalContext(fs).placements(approach_table(fs, *scores), "val"), 0.5, policy).iloc[0]
+                 for fs in (approach_set, imported))
+    assert (got.outcome, got.steps, got.rejections) == (want.outcome, want.steps, want.rejections) == \
+        ("success", want.steps, "0:same_category:0.300")
+    assert got.path == pytest.approx(want.path, abs=1e-5)

@@ -45,6 +45,7 @@ TARGET_ID, SAME_CATEGORY_ID, OTHER_ID = 100000, 100001, 100002
 LABELS = {TARGET_ID: (1, "target"), SAME_CATEGORY_ID: (2, "same_category"), OTHER_ID: (3, "other")}
 IMAGE_FORMATS = ("source", "png", "jpeg")
 POSES = "poses.json"  # per episode (``FrameRecorder``): camera hfov and height, and per step gps, compass, pitch
+APPROACH = "approach.json"  # per episode, where recorded: the steps that are approach views, {step: [object, metres]}
 PIN_HFOV_DEG, PIN_CAMERA_HEIGHT = 42.0, 1.31  # PIN's RGB camera
 JPEG_SUFFIXES = (".jpg", ".jpeg")
 
@@ -179,6 +180,7 @@ def _import_episode(writer: FrameSetWriter, folder: Path, ids: tuple[str, str], 
     semantic = _frame_files(folder / "semantic", (".npy",))
     depth = _frame_files(folder / "depth", (".npy",))
     legend = {1: (target, "target"), 2: (None, "same_category"), 3: (None, "other")}
+    approach = _approach_steps(folder / APPROACH)
     for step in sorted(rgb):
         if step not in semantic:
             raise FrameSetError(f"episode {episode_id!r}: frame {rgb[step]} has no semantic frame "
@@ -200,8 +202,20 @@ def _import_episode(writer: FrameSetWriter, folder: Path, ids: tuple[str, str], 
                                     f"{d.dtype} {d.shape}")
             d = d.reshape(mask.shape).astype(np.float32)
         pose = None if poses is None else _camera_pose(poses, step, folder / POSES)
-        writer.write_frame(episode_id, step, Frame(image, mask, legend, d, pose),
+        writer.write_frame(episode_id, step, Frame(image, mask, legend, d, pose, approach.get(step)),
                            _stored_image(rgb[step], image_format))
+
+
+def _approach_steps(path: Path) -> dict[int, tuple[str, float]]:
+    """The recorded episode's approach views (``FrameRecorder.record(..., approach=)``): step -> (object id,
+    horizontal metres to it); none where the episode recorded no ``approach.json``."""
+    if not path.is_file():
+        return {}
+    data = atomic.read_json(path, FrameSetError, "recorded approach views")
+    try:
+        return {int(step): (str(view[0]), float(view[1])) for step, view in data["views"].items()}
+    except (KeyError, TypeError, ValueError, IndexError, AttributeError) as exc:
+        raise FrameSetError(f"{path}: expected {{'views': {{step: [object id, metres], ...}}}} ({exc})") from exc
 
 
 def _stored_image(path: Path, image_format: str) -> ImageFile:

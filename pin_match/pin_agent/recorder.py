@@ -22,7 +22,7 @@ from typing import Any
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.importer import LABELS, PIN_CAMERA_HEIGHT, PIN_HFOV_DEG, POSES, TARGET_ID
+from pin_match.data.importer import APPROACH, LABELS, PIN_CAMERA_HEIGHT, PIN_HFOV_DEG, POSES, TARGET_ID
 from pin_match.errors import PinMatchError
 from pin_match.pin_agent.episode import episode_record, labels_in_episode
 
@@ -57,6 +57,7 @@ class FrameRecorder:
         self._steps = 0
         self._size: tuple[int, int] | None = None
         self._poses: list[list[float]] = []
+        self._approach: dict[str, list] = {}
         self._this_run: set[str] = set()
 
     # ------------------------------------------------------------------ episodes
@@ -92,7 +93,7 @@ class FrameRecorder:
                                  "names episode folders by id, so a recording holds each id once")
         self._this_run.add(episode_id)
         self._record, self._labels, self._steps, self._size = record, labels_in_episode(record), 0, None
-        self._poses = []
+        self._poses, self._approach = [], {}
         if done is None:
             self._clear_leftovers(episode_id)
             try:
@@ -101,20 +102,28 @@ class FrameRecorder:
                 raise atomic.OutputError(f"cannot write into {self.root}: {exc.strerror or exc}") from exc
         return done is None
 
-    def record(self, observations: Mapping[str, Any], *, camera_pitch: float | None = None) -> None:
+    def record(self, observations: Mapping[str, Any], *, camera_pitch: float | None = None,
+               approach: tuple[str, float] | None = None) -> None:
         """Store one step: ``rgb`` (H x W x 3 uint8), ``semantic`` (PIN labels), optional ``depth`` (metres), and
         where the agent stood: PIN's ``gps`` ([forward, right] metres from the start) and ``compass`` (radians, turned
         left positive), with ``camera_pitch`` (radians up, the agent's tilt, 0 = level); every step of an episode
         or none. The pitch is required with the pose: the observation does not hold it, PIN's look-up and
-        look-down actions change it, and a level camera assumed for a tilted one misplaces every pixel."""
+        look-down actions change it, and a level camera assumed for a tilted one misplaces every pixel.
+
+        ``approach``: (object id, horizontal metres to its centre) for a step the agent took walking up to an object
+        of the episode to check it, away from its walk: an approach view (docs/frameset.md), recorded after the
+        walk's steps where the simulator can send the agent there and back."""
         if self._record is None:
             raise RecordingError("record() before start_episode(): open the episode first")
         if self._staging is None:
             return  # finished in an earlier run
         where = f"episode {self._record['episode_id']!r}, step {self._steps}"
         rgb, semantic, depth = self._check_step(observations, where)
+        view = None if approach is None else self._check_approach(approach, where)  # before the pose is kept
         self._check_pose(observations, camera_pitch, where)
         step = self._steps
+        if view is not None:
+            self._approach[str(step)] = view
         atomic.write_image(self._staging / "rgb" / f"{step}.png", rgb)
         _write_npy(self._staging / "semantic" / f"{step}.npy", semantic)
         if depth is not None:
@@ -133,6 +142,8 @@ class FrameRecorder:
                 raise RecordingError(f"episode {record['episode_id']!r} has no recorded step: nothing to publish")
             if self._poses:
                 atomic.write_json(staging / POSES, {**self.camera, "gps_compass_pitch": self._poses})
+            if self._approach:
+                atomic.write_json(staging / APPROACH, {"views": self._approach})
             try:
                 staging.rename(folder)
             except OSError as exc:
@@ -219,6 +230,15 @@ class FrameRecorder:
             raise RecordingError(f"{where}: gps must be 2 finite numbers and compass 1 (PIN's sensors), got gps "
                                  f"{gps.tolist()} compass {compass.tolist()} pitch {pitch!r}")
         self._poses.append(values)
+
+    def _check_approach(self, approach: tuple[str, float], where: str) -> list:
+        record = self._record or {}
+        objects = {str(g["object_id"]) for g in [*record.get("goals", []), *record.get("distractors", [])]}
+        object_id, distance = approach
+        if str(object_id) not in objects or not (np.isfinite(float(distance)) and float(distance) >= 0):
+            raise RecordingError(f"{where}: approach {approach!r} must be (an object of the episode, one of "
+                                 f"{sorted(objects)}, and its horizontal distance in metres >= 0)")
+        return [str(object_id), float(distance)]
 
     def _check_labels(self, semantic: np.ndarray, where: str) -> None:
         """Ids from 100000 up are PIN's injected objects (the scene's own ids lie below): only its three exist."""
