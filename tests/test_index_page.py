@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.flows.compare import Comparison
-from pin_match.evaluation.flows.index_page import comparison_lines
+from pin_match.evaluation.flows.index_page import comparison_lines, shown_episodes
 
 
 def _comparison(fm_prec_diff: float) -> Comparison:
@@ -30,3 +30,12 @@ def test_a_difference_neither_side_can_have_is_said_so_not_printed_as_nan():
 def test_a_defined_difference_keeps_its_interval():
     line = comparison_lines(_comparison(10.0))[0]
     assert "FM-prec +10 points (95 % CI -5 to +25)" in line
+
+
+def test_the_page_draws_the_look_alike_confusions_first():
+    """Episodes where any matcher's first match was a look-alike come first, each group in id order; an episode a
+    matcher never matched is drawn only where there is room."""
+    verify = pd.Series({"e1": "target", "e3": "same_category", "e4": "other"})
+    color = pd.Series({"e2": "same_category", "e3": "target"})
+    assert shown_episodes(["e0", "e1", "e2", "e3", "e4"], [verify, color], 3) == ["e2", "e3", "e0"]
+    assert shown_episodes(["e1", "e0"], [verify], 6) == ["e0", "e1"]

@@ -120,7 +120,8 @@ def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODE
     for m in run.matchers:
         first = first_matches(run.scored(m, "val"), run.sigmas[m])
         firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
-    val = run.frameset.episodes[run.frameset.episodes.split == "val"].sort_values("episode_id").head(episodes)
+    val = run.frameset.episodes[run.frameset.episodes.split == "val"].set_index("episode_id", drop=False)
+    val = val.loc[shown_episodes(list(val.index), [firsts[m].role for m in run.matchers], episodes)]
     rows = []
     for _, ep in val.iterrows():
         target = run.frameset.target(ep.target_object_id)
@@ -141,6 +142,15 @@ def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODE
     return [html.figure_table(["target", *run.matchers], rows)]
 
 
+def shown_episodes(episode_ids: Sequence[str], first_roles: Sequence[pd.Series], episodes: int) -> list[str]:
+    """The val episodes the page draws: first those where some matcher's first match is a look-alike (the paper's
+    open problem, shown by eye), then the others, each group in id order; ``first_roles``: per matcher, the role
+    its first match shows, by episode id."""
+    confused = {e for roles in first_roles for e, role in roles.items() if role == "same_category"}
+    ordered = sorted(episode_ids, key=lambda e: (e not in confused, e))
+    return ordered[:episodes]
+
+
 def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
     n_val = int((s.bench.run.frameset.episodes.split == "val").sum())
     shown = min(n_val, EPISODES_SHOWN)
@@ -152,8 +162,9 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
         parts += [html.heading("Paired comparison", 3),
                   *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]
     parts += [html.heading("Each matcher's first match", 3),
-              html.paragraph(f"{shown} of {n_val} val episodes: the target's references, then where each matcher "
-                             "first fired (green border: the target; red: anything else, or nothing).", "note"),
+              html.paragraph(f"{shown} of {n_val} val episodes, those where a matcher's first match was a "
+                             "look-alike first: the target's references, then where each matcher first fired "
+                             "(green border: the target; red: anything else, or nothing).", "note"),
               *episode_pictures(s, assets),
               html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
     return parts
