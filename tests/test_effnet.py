@@ -153,6 +153,41 @@ def test_a_batchs_activations_come_from_the_heap_not_from_fresh_mmaps(matcher):
     assert resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before < 2_000
 
 
+def test_a_batch_of_crops_met_again_is_not_run_through_the_network(matcher, monkeypatch):
+    """A house's walk is read by each of its episodes: the same crops again (another target prepared) give the very
+    scores the network gave, without running it; the same crops in another order, or fewer, run it."""
+    rng = np.random.default_rng(7)
+    crops = [rng.integers(0, 256, (64, 48, 3), np.uint8) for _ in range(5)]
+    calls = []  # batch sizes: 3 a prepare (its reference views), 5 the crops
+    network = matcher.backbone.feature_map
+    monkeypatch.setattr(matcher.backbone, "feature_map", lambda x: calls.append(len(x)) or network(x))
+    red, blue = (np.zeros((32, 32, 4), np.uint8) + np.uint8(c) for c in ((200, 30, 30, 255), (30, 30, 200, 255)))
+    matcher.prepare(_target("red", [red] * 3))
+    first = [r.point_scores for r in matcher._match_crops(crops)]
+    matcher.prepare(_target("blue", [blue] * 3))
+    matcher._match_crops([c.copy() for c in crops])
+    matcher.prepare(_target("red", [red] * 3))
+    again = [r.point_scores for r in matcher._match_crops(crops)]
+    assert calls == [3, 5, 3, 3] and all(np.array_equal(a, b) for a, b in zip(first, again))
+    matcher._match_crops(crops[::-1])
+    matcher._match_crops(crops[:2])
+    assert calls[4:] == [5, 2]
+
+
+def test_the_batches_kept_stay_within_their_budget():
+    from pin_match.matchers.common.patch import SeenBatches
+
+    seen = SeenBatches(budget=3 * 400)  # three batches of 100 float32
+    batches = [[np.full((2, 2, 3), k, np.uint8)] for k in range(5)]
+    for k, batch in enumerate(batches):
+        seen.features(batch, lambda k=k: torch.full((100,), float(k)))
+    assert seen.held == 1200
+    computed = []
+    assert float(seen.features(batches[4], lambda: computed.append(4) or torch.zeros(100))[0]) == 4.0
+    seen.features(batches[0], lambda: computed.append(0) or torch.zeros(100))  # dropped: the oldest
+    assert computed == [0]
+
+
 @pytest.mark.skipif(shutil.which("g++") is None, reason="torch.compile on a CPU builds C++ kernels with g++")
 def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frameset):
     """``compile=True`` compiles the cut network (static shapes) and changes nothing a matcher returns: scores

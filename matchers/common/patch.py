@@ -13,8 +13,11 @@ and which target vectors.
 from __future__ import annotations
 
 import functools
+import hashlib
+import threading
 from abc import abstractmethod
-from collections.abc import Sequence
+from collections import OrderedDict
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import ClassVar
@@ -90,6 +93,47 @@ class PatchConfig(CropConfig):
             raise ConfigError(f"{type(self).__name__}: img_size={self.img_size} is too small")
 
 
+REMEMBERED_BYTES = 384 * 2**20  # crop features a matcher keeps: a house's walk and approach views (about 120 frames,
+# two crops each: 240 MB at effnet's 196 x 1280 tokens a crop) fit, so each of its episodes reads them again
+
+
+class SeenBatches:
+    """The features of the crop batches a matcher met last, by a digest of their pixels and order: an exploration
+    walk is read by every episode of its house (one target each), so its frames come again batch for batch and
+    are not run through the network again. Whole batches only, so a result is the very one the network gave,
+    whatever was met before; the oldest are dropped past ``budget`` bytes."""
+
+    def __init__(self, budget: int = REMEMBERED_BYTES) -> None:
+        self.budget, self.held = budget, 0
+        self._seen: OrderedDict[bytes, torch.Tensor] = OrderedDict()
+        self._lock = threading.Lock()  # a batch's parts are matched in threads of their own
+
+    def features(self, images: Sequence[np.ndarray], encode: Callable[[], torch.Tensor]) -> torch.Tensor:
+        key = batch_digest(images)
+        with self._lock:
+            known = self._seen.get(key)
+            if known is not None:
+                self._seen.move_to_end(key)
+                return known.clone()
+        known = encode()
+        with self._lock:
+            if key not in self._seen:
+                self._seen[key] = known
+                self.held += known.nbytes
+            while self.held > self.budget and self._seen:
+                self.held -= self._seen.popitem(last=False)[1].nbytes
+        return known.clone()
+
+
+def batch_digest(images: Sequence[np.ndarray]) -> bytes:
+    """A digest of a batch's pixels, shapes and order."""
+    h = hashlib.blake2b(digest_size=16)
+    for image in images:
+        h.update(repr((image.shape, image.dtype.str)).encode())
+        h.update(np.ascontiguousarray(image).data)
+    return h.digest()
+
+
 class PatchSimilarityMatcher(CropMatcher):
     """Max-over-targets cosine between observation patches and target vectors.
 
@@ -105,6 +149,7 @@ class PatchSimilarityMatcher(CropMatcher):
         super().__init__(cfg)
         self._backbone = backbone
         self._targets: torch.Tensor | None = None
+        self._seen = SeenBatches()
 
     @property
     def backbone(self) -> PatchBackbone:
@@ -146,7 +191,7 @@ class PatchSimilarityMatcher(CropMatcher):
     @torch.inference_mode()
     def _match_crops(self, crops: list[np.ndarray]) -> list[MatchResult]:
         backbone = self.backbone
-        feats = backbone.encode(crops).patches
+        feats = self._seen.features(crops, lambda: backbone.encode(crops).patches)
         scores = patch_scores(feats, self.targets).numpy().astype(np.float32)
         grid = backbone.grid
         results = []
