@@ -206,6 +206,23 @@ def test_a_rejected_lookalike_then_the_target_counts_every_step_of_the_detour(ap
     assert near.outcome == "category error" and near.rejected == 0 and near.steps == 0 + forward + 1
 
 
+def test_a_stop_that_the_detours_push_past_pins_step_limit_is_no_stop(approach_set, monkeypatch):
+    """The rejected look-alike's detour and the walk to the target take 42 steps (the test above): under a limit
+    of 42 the stop is a success, under 41 the episode ends before the agent stops: not found, at the limit."""
+    from pin_match.evaluation import EvalContext
+    from pin_match.evaluation.core import navigation
+
+    places = EvalContext(approach_set).placements(approach_table(approach_set, [0.9, 0.0, 0.9, 0.2],
+                                                                 [0.8, 0.3, 0.4, 0.85]), "val")
+    policy = ApproachVerify(distance=1.0, sigma2=0.6)
+    monkeypatch.setattr(navigation, "MAX_STEPS", 42)
+    assert navigation.episodes_at(places, 0.5, policy).iloc[0].outcome == "success"
+    monkeypatch.setattr(navigation, "MAX_STEPS", 41)
+    row = navigation.episodes_at(places, 0.5, policy).iloc[0]
+    assert (row.outcome, row.steps, row.spl, row.rejected) == ("not found", 41, 0.0, 1)
+    assert row.stop_step is None or np.isnan(row.stop_step)
+
+
 def test_a_candidate_with_no_approach_views_is_judged_on_its_own_frame(approach_set):
     """The ball has no approach views: a firing on it (0.7) is rejected at a second line of 0.75 after its detour
     (3 m ahead: no turn), and the walk's end comes with nothing else: not found, the detour's steps

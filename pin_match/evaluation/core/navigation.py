@@ -54,6 +54,7 @@ STAND_MARGIN = 0.1  # metres: without a floor map the agent stops this far beyon
 ON_OBJECT = 0.5  # metres: a goal point this near an object's centre is on it (its approach views are the close look)
 REMEMBERED_CELL = 0.5  # metres: a rejected goal on no object is remembered as its floor cell of this size
 ABOUT_FACE = 6  # turns of 30 degrees: the agent turns back to its walk after rejecting a candidate
+MAX_STEPS = 1000  # PIN's episode ends here: a stop not called within this many steps is no stop
 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
@@ -110,6 +111,7 @@ class Placements:
         self.category = dict(zip(fs.objects.object_id, fs.objects.category.astype(str)))
         self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
         self.views = _approach_views(fs, approach)
+        self.walks: dict[tuple[int, bytes], tuple[np.ndarray, float, int]] = {}  # ``_walk_to``'s, by frame and point
 
     def close_look(self, frame: int, placed: tuple[np.ndarray, str]) -> CloseLook:
         """Frame ``frame``'s candidate, placed at ``placed``'s goal point, as an agent walking up to it meets it: the
@@ -236,19 +238,29 @@ def _episode(places: Placements, decision: Decision, start: int, end: int,
     geometry = places.geometry.episodes[episode_id]
     target_id = places.target[episode_id]
     if decision.chosen is not None:
-        return _stop(places, geometry, episode_id, target_id, decision, placed)
+        return _within_budget(_stop(places, geometry, episode_id, target_id, decision, placed))
     last = end - 1
     target = np.asarray(geometry.positions[target_id])
     position = np.r_[places.xy[last], geometry.start.z]  # where it stands when the walk ends, on the floor
     detour_steps, detour_path = _detours(places, geometry, decision, placed)
-    return dict(episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None,
-                stop_step=None, point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None,
-                stand_x=float(position[0]), stand_y=float(position[1]),
-                d2g=float(np.linalg.norm(position - target)), path=float(places.walked[last]) + detour_path,
-                geodesic=geometry.geodesic_distance, spl=0.0, steps=int(places.steps[last]) + detour_steps,
-                unplaced_candidates=decision.unplaced,
-                fired_step=None if decision.fired is None else int(places.steps[decision.fired]),
-                candidates=len(decision.candidates))
+    return _within_budget(dict(
+        episode_id=episode_id, target_object_id=target_id, outcome="not found", stop_frame_id=None, stop_step=None,
+        point_frame_id=None, landed_on=None, point_x=None, point_y=None, point_z=None, stand_x=float(position[0]),
+        stand_y=float(position[1]), d2g=float(np.linalg.norm(position - target)),
+        path=float(places.walked[last]) + detour_path, geodesic=geometry.geodesic_distance, spl=0.0,
+        steps=int(places.steps[last]) + detour_steps, unplaced_candidates=decision.unplaced,
+        fired_step=None if decision.fired is None else int(places.steps[decision.fired]),
+        candidates=len(decision.candidates)))
+
+
+def _within_budget(row: dict) -> dict:
+    """PIN ends an episode after ``MAX_STEPS``: where the detours push the stop (or the walk's end) beyond it, the
+    agent never stopped: not found, at ``MAX_STEPS`` steps (D2G stays where it was heading: the position at the
+    limit itself is not modelled)."""
+    if row["steps"] <= MAX_STEPS:
+        return row
+    return row | dict(outcome="not found", stop_frame_id=None, stop_step=None, landed_on=None, spl=0.0,
+                      steps=MAX_STEPS)
 
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
@@ -284,6 +296,14 @@ def _walk_to(places: Placements, geometry: EpisodeGeometry, t: int, point: np.nd
     """From where the agent stands at frame ``t`` to where it stands beside ``point``: the standing point, the
     metres walked (the shortest walk on the episode's floor map, around walls and furniture, ``FloorMap.walk_length``;
     the straight line without one) and the turns toward the straight heading."""
+    key = (t, np.asarray(point, np.float64).tobytes())  # a sweep meets the same walk at many sigmas
+    if key not in places.walks:
+        places.walks[key] = _walk_from(places, geometry, t, point)
+    return places.walks[key]
+
+
+def _walk_from(places: Placements, geometry: EpisodeGeometry, t: int, point: np.ndarray) -> tuple[np.ndarray, float,
+                                                                                                    int]:
     stand = standing_point(geometry, point, places.xy[t])
     ahead = stand[:2] - places.xy[t]
     distance = float(np.hypot(*ahead))
