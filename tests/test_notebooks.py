@@ -65,7 +65,8 @@ def test_load_bench(bench_run):
         assert run.sigmas[name] == run.reports[name]["sigma"] == run.tuned[name]["sigma"]
         assert run.tables[name].meta["frameset_fingerprint"] == run.frameset.fingerprint
         val = run.scored(name, "val")
-        assert set(val.split) == {"val"} and len(run.scored(name)) == len(run.frameset.frames)
+        walk = len(run.frameset.frames) - len(run.frameset.approach_views)  # the walks' frames: what metrics read
+        assert set(val.split) == {"val"} and len(run.scored(name)) == walk and len(run.frameset.approach_views)
     # the synthetic set has geometry: the navigation estimate comes first, in the paper's order
     assert list(run.table().columns[:12]) == ["sigma", "sigma from", "SR", "SPL", "CE", "D2G", "Steps", "Not found",
                                               "%Match", "TM", "CM", "NM"]
