@@ -249,13 +249,17 @@ def observation(fs: FrameSet, frame_id: str) -> dict:
 
 
 def play_back(fs: FrameSet, recording, episodes=None) -> None:
+    """Each episode's frames recorded as PIN's agent would, its approach views as such."""
+    views = fs.approach_views.set_index("frame_id")
     for record in fs.episode_records:
         if episodes is not None and record["episode_id"] not in episodes:
             continue
         recorder = FrameRecorder(recording, split=record["split"])
         with recorder.episode(record):
             for fid in fs.frames[fs.frames.episode_id == record["episode_id"]].sort_values("step").frame_id:
-                recorder.record(observation(fs, fid))
+                approach = (views.loc[fid].approach_of, float(views.loc[fid].approach_distance)) \
+                    if fid in views.index else None
+                recorder.record(observation(fs, fid), approach=approach)
 
 
 def by_role(vis: pd.DataFrame) -> pd.DataFrame:
