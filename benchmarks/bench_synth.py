@@ -16,25 +16,22 @@ from benchmarks.timing import once
 
 
 def _time_frames(n: int) -> float:
-    """Seconds per rendered episode frame (render + mask + camera effects + encoding), one process."""
-    import numpy as np
-
+    """Seconds per rendered frame of a house's walk and approach views (render + mask + camera effects + encoding),
+    one process."""
     from pin_match.data.compose import stable_seed
-    from pin_match.data.synth.clutter import choose_scanned
-    from pin_match.data.synth.generate import EpisodePlan, plan_episodes, render_episode
+    from pin_match.data.synth.generate import HousePlan, plan_houses, render_house
     from pin_match.data.synth.objects import make_objects
     from pin_match.data.synth.scans import ScanFolder
 
     specs = make_objects(ScanFolder.open(), 4)
-    episode_id, split, scene_id, objs = plan_episodes(specs, 0, 2)[0]
-    roles = ("target",) + tuple("same_category" if o.category == objs[0].category else "other" for o in objs[1:])
-    clutter = choose_scanned([s for s in specs if s.split == split], objs,
-                             np.random.default_rng(stable_seed(0, "clutter", episode_id)))
+    house_id, split, objs, episodes = plan_houses(specs, 0, 2)[0]
     with tempfile.TemporaryDirectory() as tmp:
-        plan = EpisodePlan(episode_id, split, scene_id, stable_seed(0, "scene", scene_id),
-                           stable_seed(0, "episode", episode_id), tuple(objs), roles, n, tmp, tuple(clutter))
-        render_episode(plan)  # warm-up: first pybullet connection
-        return once(lambda: render_episode(plan)).wall_s / n
+        plan = HousePlan(house_id, split, stable_seed(0, "scene", house_id), stable_seed(0, "house", house_id),
+                         tuple(objs), tuple(episodes[:1]), n, "explore", tmp)
+        render_house(plan)  # warm-up: first pybullet connection
+        frames: dict = {}
+        timing = once(lambda: frames.update(n=len(render_house(plan)[0][1])))
+        return timing.wall_s / frames["n"]
 
 
 def _time_references(n: int) -> float:
