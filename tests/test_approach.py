@@ -276,3 +276,29 @@ def test_a_pin_recording_keeps_its_approach_views_and_the_decision(approach_set,
     assert (got.outcome, got.steps, got.rejections) == (want.outcome, want.steps, want.rejections) == \
         ("success", want.steps, "0:same_category:0.300")
     assert got.path == pytest.approx(want.path, abs=1e-5)
+
+
+def test_the_report_says_what_was_rejected_and_when_the_steps_ran_out(approach_set, tmp_path, monkeypatch):
+    """The navigation gallery names each rejected candidate (step, what its point landed on, its close score); an
+    episode whose detours pass PIN's step limit says the steps ran out, not that it was still looking."""
+    from pin_match.evaluation import evaluate
+    from pin_match.evaluation.core import navigation
+    from pin_match.evaluation.core.sigma import SigmaChoice
+    from pin_match.evaluation.pages import html
+    from pin_match.evaluation.pages.report_page import navigation_html
+
+    table = approach_table(approach_set, [0.9, 0.0, 0.9, 0.2], [0.8, 0.3, 0.4, 0.85])
+    policy = ApproachVerify(distance=1.0, sigma2=0.6)
+
+    def page(folder: str) -> str:
+        evaluation = evaluate(table, approach_set, SigmaChoice(0.5, "given", "test"), policy=policy)
+        parts = navigation_html(approach_set, table, evaluation, 0.5, html.Assets(tmp_path / folder / "p.html", "a"))
+        return " ".join(str(p) for p in parts)
+
+    shown = page("within")
+    assert "walked up to and rejected (step:point on:close score): 0:same_category:0.300" in shown
+    assert "ran out" not in shown
+    monkeypatch.setattr(navigation, "MAX_STEPS", 41)
+    monkeypatch.setattr("pin_match.evaluation.pages.report_page.MAX_STEPS", 41)
+    late = page("late")
+    assert "PIN&#39;s 41 steps ran out before it stopped" in late and "still looking" not in late

@@ -310,6 +310,14 @@ def _check_frames(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> N
                 raise FrameSetError(f"frame {frame_id!r}: missing {col} file {root / rel}")
 
 
+def is_approach_distance(value: object) -> bool:
+    """An approach view's distance to its object: a finite number of metres >= 0."""
+    try:
+        return bool(np.isfinite(float(value)) and float(value) >= 0)  # type: ignore[arg-type]
+    except (TypeError, ValueError):
+        return False
+
+
 def _check_approach_views(root: Path, frames: pd.DataFrame, episodes: pd.DataFrame) -> None:
     """An approach view names an object of its own episode and a finite distance >= 0 to it; both columns or
     neither."""
@@ -326,11 +334,7 @@ def _check_approach_views(root: Path, frames: pd.DataFrame, episodes: pd.DataFra
         if not isinstance(object_id, str) or object_id not in placed.get(episode_id, ()):
             raise FrameSetError(f"{path}: frame {frame_id!r} is an approach view of {object_id!r}, which is not an "
                                 f"object of its episode {episode_id!r}")
-        try:
-            ok = np.isfinite(float(distance)) and float(distance) >= 0
-        except (TypeError, ValueError):
-            ok = False
-        if not ok:
+        if not is_approach_distance(distance):
             raise FrameSetError(f"{path}: frame {frame_id!r} has approach_distance {distance!r}, not a finite "
                                 "distance >= 0 m")
 

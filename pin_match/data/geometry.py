@@ -132,8 +132,8 @@ class FloorMap:
         the straight line where no walk joins them (two parts of the floor). What PIN's agent walks after a commit,
         around walls and furniture, never through them."""
         centres = self.centres
-        a, b = (int(np.argmin(np.hypot(*(centres - np.asarray(p, np.float64)[:2]).T))) for p in (a_xy, b_xy))
-        walked = self._lengths_from(a)[b]
+        a, b = self._nearest_cell(a_xy), self._nearest_cell(b_xy)
+        walked = self._walks_from(a)[0][b]
         ends = float(np.hypot(*(centres[a] - np.asarray(a_xy)[:2])) + np.hypot(*(centres[b] - np.asarray(b_xy)[:2])))
         return float(walked + ends) if np.isfinite(walked) else float(np.hypot(*(np.asarray(b_xy)[:2] -
                                                                                    np.asarray(a_xy)[:2])))
@@ -141,27 +141,29 @@ class FloorMap:
     def path(self, a_xy: Sequence[float], b_xy: Sequence[float]) -> np.ndarray:
         """The shortest walk of ``walk_length`` as waypoints (K, 2), from ``a_xy`` through the standable cells'
         centres to ``b_xy``; the straight line where no walk joins them."""
-        from scipy.sparse.csgraph import dijkstra
-
-        centres = self.centres
-        a, b = (int(np.argmin(np.hypot(*(centres - np.asarray(p, np.float64)[:2]).T))) for p in (a_xy, b_xy))
+        a, b = self._nearest_cell(a_xy), self._nearest_cell(b_xy)
         ends = np.asarray(a_xy, np.float64)[:2], np.asarray(b_xy, np.float64)[:2]
-        lengths, parents = dijkstra(self._graph(), indices=a, return_predecessors=True)
+        lengths, parents = self._walks_from(a)
         if not np.isfinite(lengths[b]):
             return np.stack(ends)
         cells = [b]
         while cells[-1] != a:
             cells.append(int(parents[cells[-1]]))
-        return np.vstack([ends[0], centres[cells[::-1]], ends[1]])
+        return np.vstack([ends[0], self.centres[cells[::-1]], ends[1]])
 
-    def _lengths_from(self, source: int) -> np.ndarray:
-        """Walk lengths from the standable cell ``source`` (an index into ``centres``) to every one, cached per
-        source: a sweep of sigmas asks the same few sources again and again."""
+    def _nearest_cell(self, xy: Sequence[float]) -> int:
+        """The standable cell nearest a point (an index into ``centres``)."""
+        return int(np.argmin(np.hypot(*(self.centres - np.asarray(xy, np.float64)[:2]).T)))
+
+    def _walks_from(self, source: int) -> tuple[np.ndarray, np.ndarray]:
+        """Walk lengths from the standable cell ``source`` (an index into ``centres``) to every one, and each cell's
+        predecessor on its shortest walk; cached per source: a sweep of sigmas asks the same few sources again and
+        again."""
         from scipy.sparse.csgraph import dijkstra
 
-        cache = self.__dict__.setdefault("_lengths", {})
+        cache = self.__dict__.setdefault("_walks", {})
         if source not in cache:
-            cache[source] = dijkstra(self._graph(), indices=source)
+            cache[source] = dijkstra(self._graph(), indices=source, return_predecessors=True)
         return cache[source]
 
     def _graph(self):

@@ -9,7 +9,6 @@ handed to the writer afterwards.
 from __future__ import annotations
 
 import hashlib
-import math
 import shutil
 import tempfile
 from collections.abc import Mapping, Sequence
@@ -36,6 +35,7 @@ from pin_match.data.frameset import (
     VISIBILITY,
     FrameSet,
     FrameSetError,
+    is_approach_distance,
 )
 from pin_match.data.geometry import MAPS, POSE_COLUMNS, CameraModel, EpisodeGeometry, GeometryError, Pose
 
@@ -142,7 +142,7 @@ def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
 
 def _approach_columns(frame_id: str, approach: tuple[str, float]) -> dict:
     object_id, distance = approach
-    if not (isinstance(object_id, str) and object_id and math.isfinite(float(distance)) and distance >= 0):
+    if not (isinstance(object_id, str) and object_id and is_approach_distance(distance)):
         raise FrameSetError(f"frame {frame_id}: approach {approach!r} is not (object id, finite distance >= 0 m)")
     return dict(approach_of=object_id, approach_distance=float(distance))
 

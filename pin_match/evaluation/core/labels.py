@@ -56,7 +56,7 @@ def frame_labels(fs: FrameSet) -> pd.DataFrame:
     out["target_pixels"] = pixels.astype(np.int64)
     out["target_depth"] = mean_depth
     out["target_seen"] = seen_rule(pixels, area, mean_depth)
-    out["approach"] = frames["approach_of"].notna().to_numpy() if "approach_of" in frames.columns else False
+    out["approach"] = frames.frame_id.isin(fs.approach_views.frame_id).to_numpy()
     return out[LABEL_COLUMNS]
 
 

@@ -160,7 +160,7 @@ def _approach_views(fs: FrameSet, approach: pd.DataFrame | None) -> dict[tuple[s
     """Per (episode, object), its scored approach views as (distance, score), far to near."""
     if approach is None or approach.empty:
         return {}
-    rows = fs.frames.set_index("frame_id").loc[approach.frame_id, ["approach_of", "approach_distance", "step"]]
+    rows = fs.approach_views.set_index("frame_id").loc[approach.frame_id, ["approach_of", "approach_distance", "step"]]
     table = pd.DataFrame({"episode_id": approach.episode_id.to_numpy(), "object_id": rows.approach_of.to_numpy(),
                           "distance": rows.approach_distance.to_numpy(np.float64),
                           "score": approach.score.to_numpy(np.float64), "step": rows.step.to_numpy()})

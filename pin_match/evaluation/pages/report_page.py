@@ -17,6 +17,7 @@ from pin_match.contract.cohort import TargetCohort
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.evaluator import Evaluation
 from pin_match.evaluation.core.layout import ReportFiles
+from pin_match.evaluation.core.navigation import MAX_STEPS
 from pin_match.evaluation.core.tables import report_tables
 from pin_match.evaluation.pages import html
 from pin_match.evaluation.pages.gallery import DEFAULT_CAP, Section, frame_points, frame_view, sections
@@ -132,6 +133,7 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
             caption.append(f"walked up to and rejected (step:point on:close score): {w.rejections}")
         if w.outcome == "not found":
             never = "never stopped" if pd.isna(w.fired_step) else \
+                f"PIN's {MAX_STEPS:,} steps ran out before it stopped" if w.steps >= MAX_STEPS else \
                 "rejected every candidate it walked up to" if w.rejected == w.candidates else \
                 f"still looking: the window opened at step {w.fired_step:.0f} ran past the walk's end"
             figures.append(html.figure([], [*caption, f"{never}; walk's end {w.d2g:.2f} m from the target",
