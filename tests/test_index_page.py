@@ -35,7 +35,8 @@ def test_a_defined_difference_keeps_its_interval():
 def test_the_page_draws_the_look_alike_confusions_first():
     """Episodes where any matcher's first match was a look-alike come first, each group in id order; an episode a
     matcher never matched is drawn only where there is room."""
-    verify = pd.Series({"e1": "target", "e3": "same_category", "e4": "other"})
-    color = pd.Series({"e2": "same_category", "e3": "target"})
+    lookalike = "same-category look-alike"  # as gallery.frame_roles names a frame's class
+    verify = pd.Series({"e1": "target", "e3": lookalike, "e4": "other"})
+    color = pd.Series({"e2": lookalike, "e3": "target"})
     assert shown_episodes(["e0", "e1", "e2", "e3", "e4"], [verify, color], 3) == ["e2", "e3", "e0"]
     assert shown_episodes(["e1", "e0"], [verify], 6) == ["e0", "e1"]

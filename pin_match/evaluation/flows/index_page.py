@@ -18,13 +18,14 @@ import pandas as pd
 from markupsafe import Markup
 
 from pin_match.evaluation.core.analysis import BenchRun
+from pin_match.evaluation.core.labels import CM
 from pin_match.evaluation.core.layout import BenchLayout
 from pin_match.evaluation.core.navigation import episodes_at
 from pin_match.evaluation.core.stop import StopPolicy
 from pin_match.evaluation.flows.bench import Bench
 from pin_match.evaluation.flows.compare import Comparison
 from pin_match.evaluation.pages import html
-from pin_match.evaluation.pages.gallery import first_matches, frame_roles
+from pin_match.evaluation.pages.gallery import ROLE_NAMES, first_matches, frame_roles
 from pin_match.evaluation.pages.pictures import legend, reference_images, scored_frame_image
 
 EPISODES_SHOWN = 6
@@ -145,8 +146,8 @@ def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODE
 def shown_episodes(episode_ids: Sequence[str], first_roles: Sequence[pd.Series], episodes: int) -> list[str]:
     """The val episodes the page draws: first those where some matcher's first match is a look-alike (the paper's
     open problem, shown by eye), then the others, each group in id order; ``first_roles``: per matcher, the role
-    its first match shows, by episode id."""
-    confused = {e for roles in first_roles for e, role in roles.items() if role == "same_category"}
+    its first match shows (``gallery.frame_roles``), by episode id."""
+    confused = {e for roles in first_roles for e, role in roles.items() if role == ROLE_NAMES[CM]}
     ordered = sorted(episode_ids, key=lambda e: (e not in confused, e))
     return ordered[:episodes]
 
