@@ -6,14 +6,14 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.flows.compare import Comparison
-from pin_match.evaluation.flows.index_page import comparison_lines, shown_episodes
+from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes
 
 
-def _comparison(fm_prec_diff: float) -> Comparison:
+def _comparison(fm_prec_diff: float, fm_prec_ci: tuple[float, float] = (-5.0, 25.0)) -> Comparison:
     diff = "color@1 - verify@2"
-    paired = pd.DataFrame({diff: [fm_prec_diff, 0.143, 0.151], "CI low": [np.nan if np.isnan(fm_prec_diff) else -5.0,
-                                                                          0.001, -0.001],
-                           "CI high": [np.nan if np.isnan(fm_prec_diff) else 25.0, 0.277, 0.269]},
+    paired = pd.DataFrame({diff: [fm_prec_diff, 0.143, 0.151], "CI low": [np.nan if np.isnan(fm_prec_diff) else
+                                                                          fm_prec_ci[0], 0.001, -0.001],
+                           "CI high": [np.nan if np.isnan(fm_prec_diff) else fm_prec_ci[1], 0.277, 0.269]},
                           index=["FM-prec", "AUROC-same", "AUROC"])
     test = dict(only_a=0, only_b=1, both=0, p_value=1.0)
     return Comparison(("verify@2", "color@1"), paired, test, [], None)
@@ -32,6 +32,13 @@ def test_a_defined_difference_keeps_its_interval():
     assert "FM-prec +10 points (95 % CI -5 to +25)" in line
 
 
+def test_a_difference_every_resample_repeats_is_not_given_a_zero_width_interval():
+    """Both matchers' first matches missed the target in every episode: each resample's difference is 0, and
+    "95 % CI +0 to +0" would claim a certainty a few episodes cannot give."""
+    line = comparison_lines(_comparison(0.0, (0.0, 0.0)))[0]
+    assert "FM-prec +0 points (the same in every resample: too few episodes to tell)" in line and "+0 to +0" not in line
+
+
 def test_the_page_draws_the_look_alike_confusions_first():
     """Episodes where any matcher's first match was a look-alike come first, each group in id order; an episode a
     matcher never matched is drawn only where there is room."""
@@ -40,3 +47,14 @@ def test_the_page_draws_the_look_alike_confusions_first():
     color = pd.Series({"e2": lookalike, "e3": "target"})
     assert shown_episodes(["e0", "e1", "e2", "e3", "e4"], [verify, color], 3) == ["e2", "e3", "e0"]
     assert shown_episodes(["e1", "e0"], [verify], 6) == ["e0", "e1"]
+
+
+def test_the_page_counts_what_each_first_match_showed():
+    """Per matcher, over every val episode: the roles its first matches showed, in the metrics' class order, and
+    the episodes where it never fired."""
+    lookalike = "same-category look-alike"
+    verify = pd.DataFrame({"role": ["nothing", "target", "nothing"]}, index=["e1", "e2", "e3"])
+    effnet = pd.DataFrame({"role": [lookalike, "nothing", "other", lookalike]}, index=["e0", "e1", "e2", "e3"])
+    assert roles_line({"verify": verify, "effnet": effnet, "color": verify.iloc[:0]}, 4) == (
+        "What each first match showed, over the 4 val episodes: verify: target 1, nothing 2, never fired 1; "
+        f"effnet: {lookalike} 2, other 1, nothing 1; color: never fired 4.")

@@ -14,6 +14,7 @@ from pin_match.evaluation.core.intervals import (
     instance_clusters,
     percentile_interval,
     unit_codes,
+    wilson_interval,
 )
 from pin_match.evaluation.core.metrics import Bootstrap, detection_metrics, frame_arrays, ranking_metrics
 
@@ -62,3 +63,23 @@ def test_percentile_interval_leaves_undefined_resamples_out():
 def test_instance_clusters_read_the_episodes_table(tiny_frameset):
     clusters = instance_clusters(tiny_frameset.episodes)
     assert clusters == dict(zip(tiny_frameset.episodes.episode_id, tiny_frameset.episodes.target_object_id))
+
+
+def test_wilson_interval_matches_hand_computed_values():
+    z = 1.959963984540054
+    assert wilson_interval(0, 4, 0.95) == pytest.approx((0.0, z * z / (4 + z * z)))  # 0-0.490
+    assert wilson_interval(4, 4, 0.95) == pytest.approx((4 / (4 + z * z), 1.0))
+    assert wilson_interval(1, 4, 0.95) == pytest.approx((0.04559, 0.69936), abs=1e-5)  # 1 of 4: 4.6-69.9 %
+    assert all(math.isnan(b) for b in wilson_interval(0, 0, 0.95))
+
+
+def test_a_share_of_episodes_at_its_bound_gets_wilsons_interval():
+    """Above every score no episode matches: each resample repeats 0 %, so %Match and first-match success get
+    Wilson's interval over the 3 episodes (0 to z^2 / (3 + z^2)); below every score all 3 match."""
+    z2 = 1.959963984540054 ** 2
+    none = bootstrap_ci(hand_scored(), 0.95)
+    assert none["match_pct"] == pytest.approx([0.0, 100 * z2 / (3 + z2)])
+    assert none["first_match_success"] == pytest.approx([0.0, 100 * z2 / (3 + z2)])
+    every = bootstrap_ci(hand_scored(), 0.0)
+    assert every["match_pct"] == pytest.approx([100 * 3 / (3 + z2), 100.0])
+    assert every["first_match_success"][0] < 100 / 3 < every["first_match_success"][1]  # 1 of 3: percentile

@@ -249,6 +249,22 @@ def test_metrics_are_shares_of_episodes_and_means(walk_set):
     assert ci["sr"][0] <= m["sr"] <= ci["sr"][1] and ci["sr"] != [m["sr"], m["sr"]]
 
 
+def test_a_share_every_episode_agrees_on_keeps_an_interval(walk_set):
+    """0 of 3 successes: every resample repeats 0 %, and the interval is Wilson's over the resampled units
+    (z^2 / (n + z^2): 56.2 % for 3 episodes, 65.8 % for 2 target instances), not "0-0"."""
+    ctx = EvalContext(walk_set)
+    miss = episodes_at(ctx.placements(table_of(walk_set, [0.0] * 6), "val"), 0.5)
+    walks = pd.concat([miss] * 3, ignore_index=True).assign(episode_id=["a", "b", "c"])
+    m = navigation_metrics(walks)
+    assert m["metrics"]["sr"] == 0.0 and m["metrics"]["not_found_pct"] == 100.0
+    z2 = 1.959963984540054 ** 2
+    assert m["ci95"]["sr"] == pytest.approx([0.0, 100 * z2 / (3 + z2)])
+    assert m["ci95"]["not_found_pct"] == pytest.approx([100 * 3 / (3 + z2), 100.0])
+    assert m["ci95"]["d2g"][0] == m["ci95"]["d2g"][1]  # a measure that is no share keeps its percentile interval
+    pooled = navigation_metrics(walks, clusters={"a": "o1", "b": "o1", "c": "o2"})
+    assert pooled["ci95"]["sr"] == pytest.approx([0.0, 100 * z2 / (2 + z2)])
+
+
 def test_evaluate_report_and_tables_carry_the_estimate(walk_set, tmp_path):
     table = table_of(walk_set, [0.9, 0.0, 0.0, 0.9, 0.9, 0.9])
     result = report(table, walk_set, tmp_path / "report", sigma=SigmaChoice(0.5, "given", "test"))

@@ -12,6 +12,7 @@ import pandas as pd
 import pytest
 
 from pin_match.data.synth import SynthError, SynthSize, generate
+from pin_match.data.synth.generate import plan_houses
 from pin_match.data.synth.objects import ObjectSpec, describe, make_objects, title
 from pin_match.data.synth.scans import ScanFolder
 
@@ -118,7 +119,7 @@ def _episodes(houses):
 
 
 def test_targets_come_from_families_with_a_lookalike_in_their_split():
-    from pin_match.data.synth.generate import TARGETS_PER_HOUSE, plan_houses
+    from pin_match.data.synth.generate import TARGETS_PER_HOUSE
 
     specs = ([_spec(f"a{k}", "apple", "train") for k in range(2)] + [_spec("a9", "apple", "val")]
              + [_spec("b0", "box", "train")] + [_spec(f"b{k}", "box", "val") for k in range(1, 4)]
@@ -343,7 +344,10 @@ def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
 def test_objects_csv_names_each_scan_and_its_licence(synth, shipped):
     with (synth.root / "objects.csv").open(newline="", encoding="utf-8") as f:
         rows = list(csv.DictReader(f))
-    assert len(rows) == len(synth.objects) == len(make_objects(shipped, SMALL.objects_per_family))
+    in_houses = {o.object_id for _, _, objs, _ in plan_houses(make_objects(shipped, SMALL.objects_per_family),
+                                                             SMALL.seed, SMALL.episodes) for o in objs}
+    assert len(rows) == len(synth.objects) == len(in_houses)  # the objects of a house: no unused references
+    assert {r["object_id"] for r in rows} == in_houses
     for r in rows:
         assert r["source"] == GSO_SOURCE + r["object_id"], r
         assert r["licence"].startswith("CC BY 4.0 "), r

@@ -322,7 +322,9 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
     _check(size)
     folder = ScanFolder.open(PACKAGED_SCANS if scans is None else scans)
     specs = make_objects(folder, size.objects_per_family)
-    rendered_specs = [s for s in specs if s.split in size.splits]
+    houses = [h for h in plan_houses(specs, seed, size.episodes) if h[1] in size.splits]
+    in_houses = {o.object_id for _, _, objs, _ in houses for o in objs}
+    rendered_specs = [s for s in specs if s.object_id in in_houses]  # a family no house holds needs no references
     provenance = dict(generator="pin_match.data.synth", version=GENERATOR_VERSION, seed=seed, episodes=size.episodes,
                       objects_per_family=size.objects_per_family, frames_per_episode=size.frames_per_episode,
                       walk=size.walk, approach_views=size.approach_views, rooms=ROOMS,
@@ -345,9 +347,7 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                 writer.add_object(spec.object_id, spec.category, spec.split, views, list(spec.descriptions),
                                   origin=ObjectOrigin(spec.source, spec.licence))
             plans = []
-            for house_id, split, objs, episodes in plan_houses(specs, seed, size.episodes):
-                if split not in size.splits:
-                    continue
+            for house_id, split, objs, episodes in houses:
                 for episode_id, t in episodes:
                     writer.add_episode(episode_id, split, house_id, objs[t].object_id,
                                        [o.object_id for k, o in enumerate(objs) if k != t])

@@ -89,7 +89,7 @@ def commit_shares(rows: pd.DataFrame, weights: np.ndarray | None = None) -> dict
 
 def commit_metrics(rows: pd.DataFrame, clusters: Clusters | None = None, boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """``commit_shares`` with percentile intervals resampling target instances (``clusters``), as every metric."""
-    point, ci = per_episode_intervals(rows, commit_shares, clusters, boot)
+    point, ci = per_episode_intervals(rows, commit_shares, clusters, boot, shares=COMMIT_KEYS[:-1])
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(rows))
 
 

@@ -12,7 +12,8 @@ set of resamples everywhere. Definitions: docs/metrics.md, "Confidence intervals
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterator, Mapping, Sequence
+from collections.abc import Callable, Collection, Iterator, Mapping, Sequence
+from statistics import NormalDist
 
 import numpy as np
 import pandas as pd
@@ -32,6 +33,7 @@ from pin_match.evaluation.core.metrics import (
 
 Clusters = Mapping[str, str]  # episode id -> its resampling unit (the target instance)
 INTERVAL_KEYS = (*METRIC_KEYS, "auroc_target", "auroc_same")
+EPISODE_SHARE_KEYS = ("match_pct", "first_match_success")  # of INTERVAL_KEYS, the % of episodes (a yes/no each)
 
 
 def instance_clusters(episodes: pd.DataFrame) -> dict[str, str]:
@@ -55,18 +57,45 @@ def episode_weights(codes: np.ndarray, boot: Bootstrap) -> Iterator[np.ndarray]:
 
 
 def per_episode_intervals(rows: pd.DataFrame, measure: Callable[[pd.DataFrame, np.ndarray | None], dict[str, float]],
-                          clusters: Clusters | None, boot: Bootstrap) -> tuple[dict[str, float], dict]:
+                          clusters: Clusters | None, boot: Bootstrap,
+                          shares: Collection[str] = ()) -> tuple[dict[str, float], dict]:
     """A per-episode table's measures (``measure(rows, weights)``, each episode counted ``weights`` times; None:
     once) and their percentile intervals over resampled units (an interval None where every resample is
-    undefined)."""
+    undefined). ``shares`` names the measures that are the % of episodes with a yes/no outcome (SR, CE, ...), whose
+    interval at 0 % or 100 % is Wilson's (``intervals_of``)."""
     point = measure(rows, None)
     codes = unit_codes(list(rows["episode_id"]), clusters)
     drawn = [measure(rows, w) for w in episode_weights(codes, boot)] if len(rows) else []
-    ci = {}
+    return point, intervals_of(point, drawn, codes, boot.level, shares)
+
+
+def intervals_of(point: Mapping[str, float], drawn: Sequence[Mapping[str, float]], codes: np.ndarray, level: float,
+                 shares: Collection[str]) -> dict[str, list[float] | None]:
+    """Each measure's interval from its resampled values ``drawn``: the percentile one, but for a share of
+    episodes (``shares``) every unit agrees on (0 % or 100 %), where each resample repeats the point and the
+    percentile interval would be the point itself (0 of 4 episodes, "95 % CI 0-0 %"): there Wilson's over the
+    units (``wilson_interval``)."""
+    units = int(codes.max()) + 1 if len(codes) else 0
+    out: dict[str, list[float] | None] = {}
     for key in point:
-        low, high = percentile_interval(np.array([d[key] for d in drawn]), boot.level) if drawn else (math.nan,) * 2
-        ci[key] = None if math.isnan(low) else [low, high]
-    return point, ci
+        if key in shares and point[key] in (0.0, 100.0):
+            low, high = (100 * b for b in wilson_interval(round(point[key] / 100 * units), units, level))
+        else:
+            low, high = percentile_interval(np.array([d[key] for d in drawn]), level) if drawn else (math.nan,) * 2
+        out[key] = None if math.isnan(low) else [low, high]
+    return out
+
+
+def wilson_interval(successes: int, n: int, level: float) -> tuple[float, float]:
+    """Wilson's score interval of a share of ``successes`` in ``n`` trials (0-1; NaN for none): it stays inside
+    0-1 and keeps a width at 0 of n and n of n (0 of 4 at 95 %: 0-0.49)."""
+    if n <= 0:
+        return math.nan, math.nan
+    z = NormalDist().inv_cdf(0.5 + level / 2)
+    p, z2 = successes / n, z * z
+    centre = (p + z2 / (2 * n)) / (1 + z2 / n)
+    half = z * math.sqrt(p * (1 - p) / n + z2 / (4 * n * n)) / (1 + z2 / n)
+    return max(0.0, centre - half), min(1.0, centre + half)
 
 
 def percentile_interval(values: np.ndarray, level: float) -> tuple[float, float]:
@@ -125,9 +154,7 @@ def bootstrap_ci(scored: Scored, sigma: float, *, clusters: Clusters | None = No
     """
     arr = as_arrays(scored)
     side = Resampled(arr, sigma)
-    drawn = [side.metrics(w) for w in episode_weights(unit_codes(arr.episode_ids, clusters), boot)]
-    out: dict[str, list[float] | None] = {}
-    for key in INTERVAL_KEYS:
-        low, high = percentile_interval(np.array([d[key] for d in drawn]), boot.level)
-        out[key] = None if math.isnan(low) else [low, high]
-    return out
+    codes = unit_codes(arr.episode_ids, clusters)
+    point = side.metrics(np.ones(len(arr.episode_ids)))
+    drawn = [side.metrics(w) for w in episode_weights(codes, boot)]
+    return intervals_of({k: point[k] for k in INTERVAL_KEYS}, drawn, codes, boot.level, EPISODE_SHARE_KEYS)

@@ -59,6 +59,7 @@ MAX_STEPS = 1000  # PIN's episode ends here: a stop not called within this many 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
+EPISODE_SHARES = ("sr", "ce", *SHARE_KEYS)  # the % of episodes with a yes/no outcome (their intervals: intervals.py)
 REJECTION_KEYS = ("rejections", "rejected_target_pct", "rejected_lookalike_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
                    "landed_on", "point_x", "point_y", "point_z", "stand_x", "stand_y", "d2g", "path", "geodesic", "spl",
@@ -374,7 +375,7 @@ def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dic
 def navigation_metrics(episodes: pd.DataFrame, clusters: Clusters | None = None,
                        boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """``metrics_of`` with percentile intervals resampling target instances (``clusters``), as every other metric."""
-    point, ci = per_episode_intervals(episodes, metrics_of, clusters, boot)
+    point, ci = per_episode_intervals(episodes, metrics_of, clusters, boot, shares=EPISODE_SHARES)
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(episodes),
                 outcomes={o: int((episodes["outcome"] == o).sum()) for o in OUTCOMES})
 

@@ -50,7 +50,7 @@ class DemoError(PinMatchError, ValueError):
     """A demo file (the shipped sigmas) that cannot be read, or a file a demo set's builder reads that is missing."""
 
 
-SCANNED_SIZE = SynthSize(episodes=8, objects_per_family=3, approach_views=False)  # its page reports PIN's first
+SCANNED_SIZE = SynthSize(episodes=12, objects_per_family=3, approach_views=False)  # its page reports PIN's first
 # match, which reads no approach view: a fifth fewer frames to render and score
 
 

@@ -88,6 +88,9 @@ def comparison_lines(c: Comparison) -> list[str]:
             parts.append(f"{metric} n/a (one of them matched no episode)")
             continue
         scale = "" if metric.startswith("AUROC") else " points"
+        if row["CI low"] == row["CI high"]:  # every resample gives the same difference: no interval to show
+            parts.append(f"{metric} {row[diff]:+.3g}{scale} (the same in every resample: too few episodes to tell)")
+            continue
         parts.append(f"{metric} {row[diff]:+.3g}{scale} (95 % CI {row['CI low']:+.3g} to {row['CI high']:+.3g})")
     t = c.test
     return [f"{b} minus {a}: " + "; ".join(parts) + ".",
@@ -113,14 +116,35 @@ def stops(run: BenchRun, matcher: str) -> dict[str, object]:
     return {w.episode_id: w for w in walks.itertuples()}
 
 
-def episode_pictures(s: SetResults, assets: html.Assets, episodes: int = EPISODES_SHOWN) -> list[Markup]:
-    """One row per val episode, one column per matcher: the target's references, then each matcher's first frame
-    above its sigma, and where the agent would stop (where the frame-set has geometry)."""
-    run = s.bench.run
-    firsts, walks = {}, {m: stops(run, m) for m in run.matchers}
+def first_match_roles(run: BenchRun) -> dict[str, pd.DataFrame]:
+    """Per matcher, each val episode's first frame above its sigma with the role it shows, by episode id (an
+    episode where it never fired is absent)."""
+    firsts = {}
     for m in run.matchers:
         first = first_matches(run.scored(m, "val"), run.sigmas[m])
         firsts[m] = first.assign(role=frame_roles(first)).set_index("episode_id")
+    return firsts
+
+
+def roles_line(firsts: dict[str, pd.DataFrame], n_val: int) -> str:
+    """'What each first match showed, over the 6 val episodes: verify: nothing 3, never fired 3; ...': why a
+    matcher misses the target, at a glance (a look-alike, another object, an empty wall, or silence)."""
+    parts = []
+    for m, first in firsts.items():
+        counts = first.role.value_counts()
+        said = [f"{role} {int(counts[role])}" for role in ROLE_NAMES if role in counts.index]
+        if len(first) < n_val:
+            said.append(f"never fired {n_val - len(first)}")
+        parts.append(f"{m}: {', '.join(said)}")
+    return f"What each first match showed, over the {n_val} val episodes: " + "; ".join(parts) + "."
+
+
+def episode_pictures(s: SetResults, assets: html.Assets, firsts: dict[str, pd.DataFrame],
+                     episodes: int = EPISODES_SHOWN) -> list[Markup]:
+    """One row per val episode, one column per matcher: the target's references, then each matcher's first frame
+    above its sigma (``firsts``), and where the agent would stop (where the frame-set has geometry)."""
+    run = s.bench.run
+    walks = {m: stops(run, m) for m in run.matchers}
     val = run.frameset.episodes[run.frameset.episodes.split == "val"].set_index("episode_id", drop=False)
     val = val.loc[shown_episodes(list(val.index), [firsts[m].role for m in run.matchers], episodes)]
     rows = []
@@ -155,7 +179,9 @@ def shown_episodes(episode_ids: Sequence[str], first_roles: Sequence[pd.Series],
 def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
     n_val = int((s.bench.run.frameset.episodes.split == "val").sum())
     shown = min(n_val, EPISODES_SHOWN)
-    parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results))]
+    firsts = first_match_roles(s.bench.run)
+    parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results)),
+             html.paragraph(roles_line(firsts, n_val))]
     navigation = navigation_line(s.bench.results)
     if navigation:
         parts.append(html.paragraph(navigation))
@@ -166,7 +192,7 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
               html.paragraph(f"{shown} of {n_val} val episodes, those where a matcher's first match was a "
                              "look-alike first: the target's references, then where each matcher first fired "
                              "(green border: the target; red: anything else, or nothing).", "note"),
-              *episode_pictures(s, assets),
+              *episode_pictures(s, assets, firsts),
               html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
     return parts
 
