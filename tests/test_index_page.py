@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.flows.compare import Comparison
-from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes
+from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes, stop_line
 
 
 def _comparison(fm_prec_diff: float, fm_prec_ci: tuple[float, float] = (-5.0, 25.0)) -> Comparison:
@@ -58,3 +58,17 @@ def test_the_page_counts_what_each_first_match_showed():
     assert roles_line({"verify": verify, "effnet": effnet, "color": verify.iloc[:0]}, 4) == (
         "What each first match showed, over the 4 val episodes: verify: target 1, nothing 2, never fired 1; "
         f"effnet: {lookalike} 2, other 1, nothing 1; color: never fired 4.")
+
+
+def test_a_stop_says_what_its_goal_point_landed_on():
+    """The frame's class says what it shows; where the matcher pointed is another thing (a look-alike in the corner
+    of a frame whose points are on the floor): the stop says both."""
+    from types import SimpleNamespace
+
+    walk = SimpleNamespace(outcome="other stop", fired_step=2.0, stop_step=2.0, d2g=6.0, landed_on="background")
+    assert stop_line(walk) == ("the agent stops at step 2 (its goal point on: nothing annotated): other stop, "
+                               "6.00 m from the target")
+    assert "(its goal point on: a look-alike)" in stop_line(SimpleNamespace(**{**vars(walk), "landed_on":
+                                                                                "same_category"}))
+    never = SimpleNamespace(outcome="not found", fired_step=None, stop_step=None, d2g=0.8, landed_on=None)
+    assert stop_line(never) == "the agent never stops: 0.8 m from the target at the walk's end"

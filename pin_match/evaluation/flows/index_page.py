@@ -29,6 +29,10 @@ from pin_match.evaluation.pages.gallery import ROLE_NAMES, first_matches, frame_
 from pin_match.evaluation.pages.pictures import legend, reference_images, scored_frame_image
 
 EPISODES_SHOWN = 6
+# what the point nearest an agent's goal landed on (``navigation.Placements.place``), as the page says it: a frame
+# that shows a look-alike may have fired on the floor beside it
+LANDED = {"target": "the target", "same_category": "a look-alike", "other": "another object",
+          "background": "nothing annotated"}
 PICTURE_SIZE = 200
 INDEX_ASSETS = "index_files"
 
@@ -103,7 +107,8 @@ def stop_line(walk) -> str:
     if walk.outcome == "not found":
         never = "never stops" if pd.isna(walk.fired_step) else "is still looking when the walk ends"
         return f"the agent {never}: {walk.d2g:.1f} m from the target at the walk's end"
-    return f"the agent stops at step {walk.stop_step:.0f}: {walk.outcome}, {walk.d2g:.2f} m from the target"
+    on = f" (its goal point on: {LANDED[walk.landed_on]})" if walk.landed_on in LANDED else ""
+    return f"the agent stops at step {walk.stop_step:.0f}{on}: {walk.outcome}, {walk.d2g:.2f} m from the target"
 
 
 def stops(run: BenchRun, matcher: str) -> dict[str, object]:
