@@ -184,10 +184,15 @@ def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
     return out
 
 
-def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
+Made = tuple[list[Decision], dict[int, tuple[np.ndarray, str] | None], Verify | None]  # ``walk_decisions``'
+
+
+def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH,
+                made: Made | None = None) -> pd.DataFrame:
     """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts,
-    and what an approach-verify policy rejected on its way (``walk_decisions``)."""
-    decisions, placed, verify = walk_decisions(places, sigma, policy)
+    and what an approach-verify policy rejected on its way, from ``walk_decisions`` at ``sigma`` (``made``: what it
+    returned there, for a caller that also reads the decisions)."""
+    decisions, placed, verify = made if made is not None else walk_decisions(places, sigma, policy)
     rows = []
     for (start, end), decision in zip(episode_bounds(places.arrays), decisions):
         row = _episode(places, decision, start, end, placed)
@@ -197,8 +202,7 @@ def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MAT
     return pd.DataFrame(rows, columns=EPISODE_COLUMNS)
 
 
-def walk_decisions(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> tuple[
-        list[Decision], dict[int, tuple[np.ndarray, str] | None], Verify | None]:
+def walk_decisions(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> Made:
     """The policy's decisions on the walks (``StopPolicy.decide``), a candidate placeable where its points at the
     frame's line have depth in range, an approach-verify policy's close looks read from the approach views
     (``Placements.close_look``); with the placed candidates and the close looks, for the rows built from them."""
