@@ -305,22 +305,20 @@ def test_the_report_says_what_was_rejected_and_when_the_steps_ran_out(approach_s
 
 
 def test_evaluate_decides_the_walks_once(approach_set, monkeypatch):
-    """The navigation rows and the commit table read one set of decisions: ``walk_decisions`` runs once per
-    evaluation (it ran twice, once for each), and both say the same stop."""
+    """The navigation rows and the commit table read one set of decisions: the policy decides once per
+    evaluation (it decided twice, once for each), and both say the same stop."""
     from pin_match.evaluation import evaluate
-    from pin_match.evaluation.core import evaluator, navigation
     from pin_match.evaluation.core.sigma import SigmaChoice
 
     table = approach_table(approach_set, [0.9, 0.0, 0.9, 0.2], [0.8, 0.3, 0.4, 0.85])
     calls = []
-    real = navigation.walk_decisions
+    real = ApproachVerify.decide
 
-    def counted(*args, **kwargs):
-        calls.append(args[1])
-        return real(*args, **kwargs)
+    def counted(self, arr, sigma, *args, **kwargs):
+        calls.append(sigma)
+        return real(self, arr, sigma, *args, **kwargs)
 
-    monkeypatch.setattr(navigation, "walk_decisions", counted)
-    monkeypatch.setattr(evaluator, "walk_decisions", counted)
+    monkeypatch.setattr(ApproachVerify, "decide", counted)
     evaluation = evaluate(table, approach_set, SigmaChoice(0.5, "given", "test"),
                           policy=ApproachVerify(distance=1.0, sigma2=0.6))
     assert calls == [0.5]

@@ -38,8 +38,9 @@ from pin_match.evaluation.core.stop import (
 
 COMMIT_COLUMNS = ["episode_id", "committed_step", "committed_class", "committed_score", "fired_step", "commit_step",
                   "looked_frames", "candidates", "rejected"]
-COMMIT_KEYS = ("commit_target_pct", "commit_lookalike_pct", "commit_other_pct", "commit_none_pct", "still_looking_pct",
-               "frames_looked_at")
+COMMIT_SHARES = ("commit_target_pct", "commit_lookalike_pct", "commit_other_pct", "commit_none_pct",
+                 "still_looking_pct")  # each the % of episodes with a yes/no outcome (their intervals: intervals.py)
+COMMIT_KEYS = (*COMMIT_SHARES, "frames_looked_at")
 
 
 def commitments(arr: FrameArrays, sigma: float, policy: StopPolicy,
@@ -89,7 +90,7 @@ def commit_shares(rows: pd.DataFrame, weights: np.ndarray | None = None) -> dict
 
 def commit_metrics(rows: pd.DataFrame, clusters: Clusters | None = None, boot: Bootstrap = DEFAULT_BOOT) -> dict:
     """``commit_shares`` with percentile intervals resampling target instances (``clusters``), as every metric."""
-    point, ci = per_episode_intervals(rows, commit_shares, clusters, boot, shares=COMMIT_KEYS[:-1])
+    point, ci = per_episode_intervals(rows, commit_shares, clusters, boot, shares=COMMIT_SHARES)
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(rows))
 
 

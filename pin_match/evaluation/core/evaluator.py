@@ -147,18 +147,17 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
     hits = localisation_hits(ctx.fs, table_subset(table, scored.frame_id), sigma.value)
     metrics.update(localisation_metrics(hits))
     ci95 = bootstrap_ci(arr, sigma.value, clusters=ctx.clusters, boot=ctx.boot)
-    walks, made, navigation = None, None, {"missing": ctx.fs.navigation_missing}
+    walks, navigation = None, {"missing": ctx.fs.navigation_missing}
     if navigation["missing"] is None:
-        places = ctx.placements(table, split)
-        made = walk_decisions(places, sigma.value, policy)
-        walks = episodes_at(places, sigma.value, policy, made)
+        walks = episodes_at(ctx.placements(table, split), sigma.value, policy)
         estimate = navigation_metrics(walks, ctx.clusters, ctx.boot)
         metrics.update(estimate.pop("metrics"))
         ci95.update(estimate.pop("ci95"))
         navigation = {"policy": describe(policy), **estimate}
     commits = None
     if policy != FIRST_MATCH:
-        commits = commitments(arr, sigma.value, policy, None if made is None else made[0])
+        decisions = None if walks is None else walk_decisions(ctx.placements(table, split), sigma.value, policy)[0]
+        commits = commitments(arr, sigma.value, policy, decisions)
         committed = commit_metrics(commits, ctx.clusters, ctx.boot)
         metrics.update(committed["metrics"])
         ci95.update(committed["ci95"])

@@ -113,6 +113,7 @@ class Placements:
         self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
         self.views = _approach_views(fs, approach)
         self.walks: dict[tuple[int, bytes], tuple[np.ndarray, float, int]] = {}  # ``_walk_to``'s, by frame and point
+        self.decided: tuple[tuple[float, StopPolicy], Made] | None = None  # ``walk_decisions``' last, with its key
 
     def close_look(self, frame: int, placed: tuple[np.ndarray, str]) -> CloseLook:
         """Frame ``frame``'s candidate, placed at ``placed``'s goal point, as an agent walking up to it meets it: the
@@ -187,12 +188,10 @@ def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
 Made = tuple[list[Decision], dict[int, tuple[np.ndarray, str] | None], Verify | None]  # ``walk_decisions``'
 
 
-def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH,
-                made: Made | None = None) -> pd.DataFrame:
+def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
     """One row per episode (``EPISODE_COLUMNS``): where the agent stopped, what it landed on, SR's and SPL's parts,
-    and what an approach-verify policy rejected on its way, from ``walk_decisions`` at ``sigma`` (``made``: what it
-    returned there, for a caller that also reads the decisions)."""
-    decisions, placed, verify = made if made is not None else walk_decisions(places, sigma, policy)
+    and what an approach-verify policy rejected on its way (``walk_decisions``)."""
+    decisions, placed, verify = walk_decisions(places, sigma, policy)
     rows = []
     for (start, end), decision in zip(episode_bounds(places.arrays), decisions):
         row = _episode(places, decision, start, end, placed)
@@ -205,7 +204,16 @@ def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MAT
 def walk_decisions(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> Made:
     """The policy's decisions on the walks (``StopPolicy.decide``), a candidate placeable where its points at the
     frame's line have depth in range, an approach-verify policy's close looks read from the approach views
-    (``Placements.close_look``); with the placed candidates and the close looks, for the rows built from them."""
+    (``Placements.close_look``); with the placed candidates and the close looks, for the rows built from them.
+    The last one is kept on ``places``: a report's rows (``episodes_at``) and its commit table ask for the same
+    decisions one after the other, and they are made once."""
+    key = (float(sigma), policy)
+    if places.decided is None or places.decided[0] != key:
+        places.decided = key, _decide(places, sigma, policy)
+    return places.decided[1]
+
+
+def _decide(places: Placements, sigma: float, policy: StopPolicy) -> Made:
     arr = places.arrays
     line = policy.line(arr, sigma)  # sigma, or the policy's per frame
     placed: dict[int, tuple[np.ndarray, str] | None] = {}

@@ -54,13 +54,13 @@ def trade(ctx: EvalContext, tables: Mapping[str, ScoreTable], policies: Sequence
         for policy in policies:
             tuned = tune_policy(table, ctx, policy, objective=objective, split=tune_split)
             sigma, policy = float(tuned["sigma"]), StopPolicy.parse(tuned["policy"])  # an approach's line is tuned too
-            places = ctx.placements(table, read_split) if geometry else None
-            made = walk_decisions(places, sigma, policy) if places is not None else None
-            committed = commit_metrics(commitments(ctx.arrays(table, read_split), sigma, policy,
-                                                   None if made is None else made[0]), ctx.clusters, ctx.boot)
+            decisions = walk_decisions(ctx.placements(table, read_split), sigma, policy)[0] if geometry else None
+            committed = commit_metrics(commitments(ctx.arrays(table, read_split), sigma, policy, decisions),
+                                       ctx.clusters, ctx.boot)
             metrics, ci = dict(committed["metrics"]), dict(committed["ci95"])
-            if places is not None:
-                walks = navigation_metrics(episodes_at(places, sigma, policy, made), ctx.clusters, ctx.boot)
+            if geometry:
+                walks = navigation_metrics(episodes_at(ctx.placements(table, read_split), sigma, policy),
+                                           ctx.clusters, ctx.boot)
                 metrics |= walks["metrics"]
                 ci |= walks["ci95"]
             window = policy.window if isinstance(policy, LookFurther) else None
