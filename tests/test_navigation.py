@@ -484,40 +484,23 @@ def test_a_recording_with_poses_in_some_episodes_only_is_refused(walk_set, tmp_p
 
 
 # ---------------------------------------------------------------------- the default synthetic set: oracles
-def oracle_table(fs: FrameSet, role: str) -> ScoreTable:
-    """Scores from the ground truth: each frame scores the share of it that the largest object of ``role`` covers,
-    its one point that object's pixel nearest the object's centroid."""
-    vis = fs.visibility[fs.visibility.role == role].sort_values("pixels", ascending=False)
-    vis = vis.drop_duplicates("frame_id").set_index("frame_id")
-    rows = []
-    for f in fs.frames.itertuples():
-        score, xs, ys = 0.0, [], []
-        if f.frame_id in vis.index:
-            row = vis.loc[f.frame_id]
-            py, px = np.nonzero(fs.instance_mask(f.frame_id) == row.mask_value)
-            k = int(np.argmin((px - px.mean()) ** 2 + (py - py.mean()) ** 2))
-            score, xs, ys = float(row.pixels) / (f.height * f.width), [px[k] + 0.5], [py[k] + 0.5]
-        rows.append(dict(frame_id=f.frame_id, episode_id=f.episode_id, step=f.step, split=f.split, score=score,
-                         crop_scores=[score], points_x=xs, points_y=ys, point_scores=[score] * len(xs), view=-1))
-    return ScoreTable(pd.DataFrame(rows), dict(matcher=f"oracle-{role}", matcher_id=f"oracle-{role}@0",
-                                               frameset_fingerprint=fs.fingerprint))
-
-
 @pytest.mark.slow
 def test_oracles_on_the_default_set(default_synth):
     """Matching the target wherever it shows succeeds in every episode whose walk shows it large (1,000 px: near, so
     its point has depth) and in none whose walk never shows it: the exploration does not know the target, so the
-    oracle's SR is what the walks see, not 100 % (generator 7's and 8's val split: 7 of 15). Matching its
+    oracle's SR is what the walks see, not 100 % (generator 7's and 8's val split: 7 of 15; 9's tours: see
+    docs/synthetic.md). Matching its
     look-alikes instead is never a success (they stand more than 2 m from it) and a category error wherever one
     shows large."""
+    from pin_match.evaluation.core.oracle import oracle_table
+
     ctx = EvalContext(default_synth)
     sigma = 1e-9  # any pixel of the object
     val = default_synth.split("val")
 
     def episodes_showing(role: str, pixels: int) -> set[str]:
-        """Episodes whose walk shows the role at ``pixels`` or more (an approach view is no frame of the walk)."""
-        vis = val.visibility[(val.visibility.role == role) & (val.visibility.pixels >= pixels)
-                             & ~val.visibility.frame_id.isin(val.approach_views.frame_id)]
+        """Episodes whose walk shows the role at ``pixels`` or more."""
+        vis = val.visibility[(val.visibility.role == role) & (val.visibility.pixels >= pixels)]
         return set(vis.frame_id.str.rsplit("_", n=1).str[0])
 
     target = episodes_at(ctx.placements(oracle_table(default_synth, "target"), "val"), sigma).set_index("episode_id")

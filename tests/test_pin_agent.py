@@ -643,9 +643,13 @@ def test_an_approach_runs_live_as_offline_on_replayed_walks(seed):
     """Random walks whose steps see one of four objects, each with its own views from close by (a random count, some
     none), replayed square by square: at each approach the agent feeds the object's views (each view two squares,
     its distance from ``distance()``), arrives, and walks back (``resume``) after a rejection. The live ``Decision``
-    is the offline one with the same views, the commit names the same steps, and a remembered object is never walked
-    up to twice."""
+    is the offline one with the same views, the commit names the same steps, and a goal point remembered (by the
+    cells around it) is never walked up to twice."""
+    from pin_match.data.walkup import remembered_cells
     from pin_match.evaluation.core.stop import CloseLook, StopPolicy, one_walk
+
+    def goal_of(obj) -> np.ndarray:  # each object's goal point, 3 m from the others: its own cells
+        return np.array([3.0 * int(obj), 1.0, 0.5])
 
     rng = np.random.default_rng(seed)
     for text in APPROACHES:
@@ -660,7 +664,7 @@ def test_an_approach_runs_live_as_offline_on_replayed_walks(seed):
             placeable = lambda step, cannot=unplaceable: step not in cannot  # noqa: E731
             now = {"distance": 0.0}
             detector = hand_detector(policy, sigma=0.7)
-            detector.reset(placeable=placeable, remember=lambda step, objects=objects: int(objects[step]),
+            detector.reset(placeable=placeable, goal=lambda step, objects=objects: goal_of(objects[step]),
                            distance=lambda now=now: now["distance"])
             walked_up = []
             for step, pair in enumerate(squares):
@@ -680,7 +684,8 @@ def test_an_approach_runs_live_as_offline_on_replayed_walks(seed):
                 detector.resume()
             offline = policy.decide(one_walk(squares.max(axis=1)), 0.7, placeable,
                                     verify=lambda c, objects=objects, views=views: CloseLook(
-                                        int(objects[c]), views[int(objects[c])]))[0]
+                                        *remembered_cells(goal_of(objects[c]))[:1], views[int(objects[c])],
+                                        remembered_cells(goal_of(objects[c]))[1]))[0]
             assert detector.decision == offline, (text, squares.tolist(), objects.tolist(), views)
             assert len(walked_up) == len(set(walked_up))
             if offline.stop is not None:

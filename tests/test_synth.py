@@ -268,7 +268,8 @@ def test_a_house_s_episodes_read_one_walk_rendered_once(synth):
 def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
     """One house rendered for two different targets: byte-identical frames, the roles aside."""
     from pin_match.data.compose import stable_seed
-    from pin_match.data.synth.generate import HousePlan, plan_houses, render_house
+    from pin_match.data.synth.generate import plan_houses, render_house
+    from pin_match.data.synth.house import HousePlan
 
     specs = make_objects(shipped, 2)
     house_id, split, objs, _ = plan_houses(specs, seed=3, episodes=4)[0]
@@ -278,42 +279,12 @@ def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
         plan = HousePlan(house_id, split, stable_seed(3, "scene", house_id), stable_seed(3, "house", house_id),
                          tuple(objs), (("train_000", t),), 6, "explore", str(staging))
         (_, records, geometry), = render_house(plan)
-        assert sum("approach_of" not in r.frame for r in records) == 6  # the walk; then its approach views
+        assert len(records) == 6 and not any("approach_of" in r.frame for r in records)  # the walk, nothing more
         shas.append([r.frame["sha256"] for r in records])
         measured.append(set(geometry.geodesic_to))  # the target and its look-alikes
         assert geometry.positions.keys() == {o.object_id for o in objs}
-    assert len(shas[0]) > 6 and shas[0] == shas[1]
+    assert shas[0] == shas[1]
     assert measured[0] != measured[1]
-
-
-def test_approach_views_follow_the_walk_and_close_in_on_each_object(synth):
-    """Every annotated object of an episode gets at most ``len(APPROACH_BACK)`` approach views, after the walk's last
-    step, far to near, within ``APPROACH_RANGE``; the nearest stands where an agent stops beside it, so it shows
-    the object large (1,000 px or more) unless the furniture it stands on hides it (a table top seen from below
-    its edge): in most cases, 4 in 5 here."""
-    from pin_match.data.synth.walk import APPROACH_BACK, APPROACH_RANGE
-
-    views = synth.approach_views
-    walk = walk_frames(synth)
-    assert len(walk) == SMALL.frames_per_episode * len(synth.episodes)
-    assert (views.groupby("episode_id").step.min() > walk.groupby("episode_id").step.max()).all()
-    for episode in synth.episodes.itertuples():
-        mine = views[views.episode_id == episode.episode_id]
-        assert set(mine.approach_of) == {episode.target_object_id, *episode.distractor_object_ids}
-        for _, rows in mine.sort_values("step").groupby("approach_of"):
-            assert len(rows) <= len(APPROACH_BACK) and (np.diff(rows.approach_distance) < 0).all()
-    assert (views.approach_distance <= APPROACH_RANGE).all()
-    shown = views.merge(synth.visibility, left_on=["frame_id", "approach_of"], right_on=["frame_id", "object_id"],
-                        how="left").fillna({"pixels": 0})
-    nearest = shown.sort_values("step").groupby(["episode_id", "approach_of"]).tail(1)
-    assert (nearest.pixels >= 1000).mean() >= 0.8
-
-
-def test_leaving_the_approach_views_out_keeps_the_walk_s_bytes(synth, tmp_path):
-    without = generate(tmp_path / "fs", replace(SMALL, approach_views=False), workers=2)
-    assert without.approach_views.empty and without.manifest["provenance"]["approach_views"] is False
-    walk = walk_frames(synth)
-    assert without.frames.sha256.tolist() == walk.sha256.tolist()
 
 
 def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
@@ -321,7 +292,8 @@ def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
     whole tour visits every room."""
     from pin_match.data.synth.generate import ROOMS
     from pin_match.data.synth.scene import make_house
-    from pin_match.data.synth.walk import Grid, exploration_walk, floor_map
+    from pin_match.data.synth.tour import exploration_walk
+    from pin_match.data.synth.walk import Grid, floor_map
 
     for seed in range(3):
         house = make_house(np.random.default_rng(seed), ROOMS)

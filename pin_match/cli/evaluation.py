@@ -52,7 +52,18 @@ def _table(a: argparse.Namespace, fs: FrameSet) -> ScoreTable:
     return ScoreTable.read(find_score_table(a.cache, fs, a.matcher, matcher_overrides(a)))
 
 
+def _walk_ups(a: argparse.Namespace, fs: FrameSet):
+    """An approach-verify policy's walk-ups on a synthetic set, rendered and scored by the --matcher named (none for
+    a table given by path: the command then says an approach-verify policy needs the matcher)."""
+    from pin_match.contract.registry import create_matcher
+    from pin_match.scoring.walkups import walkup_scorer
+
+    return None if a.matcher is None else walkup_scorer(fs, [create_matcher(a.matcher, **matcher_overrides(a))],
+                                                         a.cache)
+
+
 def _cmd_tune(a: argparse.Namespace) -> None:
+    from pin_match.evaluation.core.evaluator import EvalContext
     from pin_match.evaluation.core.tuning import default_threshold_path, tune, write_thresholds
 
     fs = FrameSet.load(a.frameset)
@@ -62,7 +73,8 @@ def _cmd_tune(a: argparse.Namespace) -> None:
     else:
         from pin_match.evaluation.core.policies import tune_policy
 
-        result = tune_policy(table, fs, policy_of(a), objective=a.objective, split=a.split)
+        ctx = EvalContext(fs, walk_ups=_walk_ups(a, fs))
+        result = tune_policy(table, ctx, policy_of(a), objective=a.objective, split=a.split)
     path = write_thresholds(result, a.out or default_threshold_path(table.matcher))
     policy = f", stop policy {result['policy']}" if "policy" in result else ""
     print(f"{table.matcher_id}: sigma = {result['sigma']:.6g} (tuned: {a.objective} on {a.split} = "
@@ -77,7 +89,7 @@ def _cmd_report(a: argparse.Namespace) -> None:
     fs = FrameSet.load(a.frameset)
     table = _table(a, fs)
     out = a.out or cache_dir(outputs.REPORTS, table.matcher_id, fs.fingerprint) / str(a.split)
-    result = report(table, EvalContext(fs, Bootstrap(n_boot=a.bootstrap)), out, sigma=a.threshold,
+    result = report(table, EvalContext(fs, Bootstrap(n_boot=a.bootstrap), _walk_ups(a, fs)), out, sigma=a.threshold,
                     thresholds=a.thresholds, split=a.split, policy=policy_of(a))
     m = result["metrics"]
     print(f"{table.matcher_id} on {result['split']} at sigma {result['sigma']:.6g} ({result['sigma_detail']}): "

@@ -51,8 +51,6 @@ def _cmd_synth(a: argparse.Namespace) -> None:
     given = dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
                  objects_per_family=a.objects_per_family, walk=a.walk)
     size = replace(PRESETS[a.preset], **{k: v for k, v in given.items() if v is not None})
-    if a.no_approach_views:
-        size = replace(size, approach_views=False)
     fs = generate(a.out, size, scans=a.scans, workers=a.workers, overwrite=a.overwrite,
                   progress=run_options(a).progress)
     print(f"wrote {fs}")
@@ -107,17 +105,14 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
     s.add_argument("--episodes", type=int, help=f"episodes, half train and half val (default {default.episodes})")
     s.add_argument("--objects-per-family", type=int, help="at most this many instances of a look-alike family in "
                                                           f"each split (default {default.objects_per_family})")
-    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode: the exploration's step budget, "
-                                                          "or about the approach walk's length, longer where its "
+    s.add_argument("--frames-per-episode", type=int, help="camera frames per episode: the tour's step budget (it ends "
+                                                          "when it has seen every piece of furniture), or about the "
+                                                          "approach walk's length, longer where its "
                                                           f"approach needs it (default {default.frames_per_episode})")
     s.add_argument("--walk", choices=WALKS, help="'explore' (default): one exploration per house that does not know "
                                                  "the target, every episode of the house reads it; 'approach': each "
                                                  "episode's walk heads for its target and stops beside it (it knows "
                                                  "the answer: first-match studies only)")
-    s.add_argument("--no-approach-views", action="store_true",
-                   help="leave out what an agent sees walking up to each object to check it (the approach views an "
-                        "approach-verify policy reads; docs/synthetic.md): about a third fewer frames to render "
-                        "and score")
     s.add_argument("--scans", type=Path, help="a scan folder from `pin-match data prepare gso` (default: the scans "
                                               "shipped with pin_match); its families.csv names the families")
     add_run_options(s, workers="rendering processes (default: all cores); output is the same", batch_size=False)

@@ -11,6 +11,7 @@ from pin_match.cli.evaluation import WORKERS_HELP
 
 
 def _cmd_trade(a: argparse.Namespace) -> None:
+    from pin_match.contract.registry import create_matcher
     from pin_match.data.frameset import FrameSet
     from pin_match.evaluation.core.evaluator import EvalContext
     from pin_match.evaluation.core.metrics import Bootstrap
@@ -18,15 +19,18 @@ def _cmd_trade(a: argparse.Namespace) -> None:
     from pin_match.evaluation.core.tables import markdown_table
     from pin_match.evaluation.flows.trade import DEFAULT_WINDOWS, default_objective, trade, write_trade
     from pin_match.scoring import score_many
+    from pin_match.scoring.walkups import walkup_scorer
 
     texts = [t.strip() for value in a.policy or [",".join(DEFAULT_WINDOWS)] for t in value.split(",") if t.strip()]
     policies = [StopPolicy.parse(t) for t in texts]
     ctx = EvalContext(FrameSet.load(a.frameset), Bootstrap(n_boot=a.bootstrap))
     configs = bench_overrides(a.cfg, a.matcher)
+    built = {name: create_matcher(name, **(cfg or {})) for name, cfg in configs.items()}
     with engine_run(a) as run:
-        tables = dict(zip(configs, score_many(ctx.fs, configs, out=a.out / "scores", run=run)))
-    objective = a.objective or default_objective(ctx.fs)
-    rows = trade(ctx, tables, policies, objective=objective, tune_split=a.tune_split, read_split=a.split)
+        tables = dict(zip(configs, score_many(ctx.fs, list(built.values()), out=a.out / "scores", run=run)))
+        ctx.walk_ups = walkup_scorer(ctx.fs, built.values(), a.out / "scores", run)  # approach-verify's walk-ups
+        objective = a.objective or default_objective(ctx.fs)
+        rows = trade(ctx, tables, policies, objective=objective, tune_split=a.tune_split, read_split=a.split)
     tuned = f"sigma tuned ({objective}) on {a.tune_split} for each policy, read on {a.split}"
     csv, png = write_trade(rows, a.out, f"{a.frameset}: {tuned}")
     missing = None if a.objective else ctx.fs.navigation_missing

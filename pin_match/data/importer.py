@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from pin_match import atomic
+from pin_match.data.agent import CAMERA_HEIGHT, HFOV_DEG
 from pin_match.data.frameset import (
     DESCRIPTIONS,
     IMAGE_SUFFIXES,
@@ -46,7 +47,6 @@ LABELS = {TARGET_ID: (1, "target"), SAME_CATEGORY_ID: (2, "same_category"), OTHE
 IMAGE_FORMATS = ("source", "png", "jpeg")
 POSES = "poses.json"  # per episode (``FrameRecorder``): camera hfov and height, and per step gps, compass, pitch
 APPROACH = "approach.json"  # per episode, where recorded: the steps that are approach views, {step: [object, metres]}
-PIN_HFOV_DEG, PIN_CAMERA_HEIGHT = 42.0, 1.31  # PIN's RGB camera
 JPEG_SUFFIXES = (".jpg", ".jpeg")
 
 
@@ -249,7 +249,7 @@ def _recorded_poses(recording: Path, episodes: list[dict]) -> dict[str, dict] | 
     if lacking:
         raise GeometryError(f"{recording}: episode {have[0]!r} recorded the agent's poses ({POSES}) but episode "
                             f"{lacking[0]!r} did not: record gps and compass in every episode or in none")
-    pin, out, without_camera = {"hfov_deg": PIN_HFOV_DEG, "camera_height": PIN_CAMERA_HEIGHT}, {}, []
+    pin, out, without_camera = {"hfov_deg": HFOV_DEG, "camera_height": CAMERA_HEIGHT}, {}, []
     for episode_id, path in found.items():
         data = atomic.read_json(path, GeometryError, "recorded poses")
         steps = data.get("gps_compass_pitch") if isinstance(data, dict) else None
@@ -261,7 +261,7 @@ def _recorded_poses(recording: Path, episodes: list[dict]) -> dict[str, dict] | 
     if without_camera:
         (first, missing), more = without_camera[0], len(without_camera) - 1
         warnings.warn(f"{first}{f' (and {more} more {POSES})' if more else ''} records no {' or '.join(missing)}: "
-                      f"PIN's camera assumed ({PIN_HFOV_DEG:g} degrees wide, {PIN_CAMERA_HEIGHT:g} m high); a "
+                      f"PIN's camera assumed ({HFOV_DEG:g} degrees wide, {CAMERA_HEIGHT:g} m high); a "
                       f"FrameRecorder writes both", stacklevel=3)
     return out
 

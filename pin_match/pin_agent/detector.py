@@ -38,16 +38,18 @@ after the step's last square, ``approaching`` names the candidate's step (its go
 ``candidate_maps(step)``, as a commit's). The steps the agent sees on its way are views of the candidate, not steps
 of its walk: each one's distance to the candidate comes from ``reset(distance=...)``, asked once a view. At the
 standing point the agent calls ``arrived()``: the policy decides on the views (the same ``decide``, the views given
-as ``stop.CloseLook``) and commits (``committed``, the maps as for any commit) or rejects the candidate. After a
+as ``stop.CloseLook``) and commits (``committed``; the next call returns the candidate's maps merged, as a commit
+to an earlier step does) or rejects the candidate. After a
 rejection the agent walks back to its route, ``returning`` is true, the squares it passes are not looked at (empty
-maps), and ``resume()`` takes the walk up again. ``reset(remember=...)`` says what the agent remembers of a step's
-candidate (its goal's map cell): a later firing on the same thing is passed over without walking up to it.
+maps), and ``resume()`` takes the walk up again. ``reset(goal=...)`` gives each step's goal point: a rejected one is
+remembered by the cells of the agent's map around it, and a later firing there is passed over without walking up to
+it, as offline (``walkup.remembered_cells``).
 """
 
 from __future__ import annotations
 
 import hashlib
-from collections.abc import Callable, Hashable, Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -58,6 +60,7 @@ import torch
 from pin_match import atomic
 from pin_match.contract.matcher import N_DESCRIPTIONS, N_VIEWS, ConfigError, Matcher, MatchResult, Modality, Target
 from pin_match.contract.registry import create_matcher
+from pin_match.data.walkup import remembered_cells
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.sigma import SigmaChoice, SigmaError, resolve_sigma, thresholds_path
 from pin_match.evaluation.core.stop import (
@@ -148,20 +151,22 @@ class PinDetector:
     def last_score(self) -> float | None:
         return None if self.last_result is None else self.last_result.score
 
-    def reset(self, placeable: Placeable | None = None, remember: Callable[[int], Hashable] | None = None,
+    def reset(self, placeable: Placeable | None = None, goal: Callable[[int], np.ndarray] | None = None,
               distance: Callable[[], float] | None = None) -> None:
         """A new episode: the next ``forward`` prepares the matcher for its references, once. ``placeable(step)``:
         can the candidate of that step (0-based since this reset) be placed in the house? The agent answers from the
         step's depth and ``candidate_maps(step)``; it may be asked again, and about the present step while its later
         squares are still to come (points added by a later square only make a candidate placeable). None: every
-        candidate can (PIN's agent finds out itself). Under an approach-verify policy, ``remember(step)``: what the
-        agent remembers of that step's candidate once rejected (None: the step itself); ``distance()``: the agent's
-        distance now to the candidate it walks up to, in metres (needed by that policy)."""
+        candidate can (PIN's agent finds out itself). Under an approach-verify policy, ``goal(step)``: the goal point
+        (x, y, z) the agent placed for that step's candidate, remembered once rejected by the cells of its map around
+        it (``walkup.remembered_cells``; None: by the step itself); ``distance()``: the agent's distance now to the
+        candidate it walks up to, in metres (needed by that policy)."""
         self._episode_open = True
-        self._remember = remember
+        self._goal = goal
         self._distance = distance
         self.approaching: int | None = None  # the step whose candidate the agent walks up to
         self.returning = False  # walking back to its route after a rejection
+        self._deliver = False  # a commit made at ``arrived``: the next call returns the candidate's map
         self._views: dict[int, list[tuple[float, float]]] = {}  # per candidate step, its views (distance, score)
         self._looks: dict[int, tuple[tuple[float, float], ...]] = {}  # per candidate walked up to, its views
         self._prepared = False
@@ -213,6 +218,7 @@ class PinDetector:
         self.approaching = None
         self._decide()
         self.returning = self.committed is None
+        self._deliver = self.committed is not None  # the next call answers with the candidate's map
 
     def resume(self) -> None:
         """The agent is back on its route after a rejection: its next steps are its walk's again."""
@@ -230,9 +236,12 @@ class PinDetector:
         self._view_squares += 1
 
     def _close_look(self, step: int) -> CloseLook:
-        """A step's candidate as the policy meets it live: remembered as ``remember`` says, its views once arrived."""
-        key = step if self._remember is None else self._remember(step)
-        return CloseLook(key, self._looks.get(step))
+        """A step's candidate as the policy meets it live: remembered by the cells around its goal point (by its step
+        without ``goal``), its views once arrived."""
+        if self._goal is None:
+            return CloseLook(step, self._looks.get(step))
+        key, around = remembered_cells(self._goal(step))
+        return CloseLook(key, self._looks.get(step), around)
 
     def candidate_maps(self, step: int) -> tuple[torch.Tensor, ...]:
         """Each square's map of a step so far, at the step's line (sigma, or the policy's above it): the points a
@@ -275,6 +284,9 @@ class PinDetector:
         present, square = len(self._steps) - 1, len(self._steps[-1]) - 1
         result, shape = self._steps[present][square]
         commit = self.committed
+        if commit is not None and self._deliver:  # committed on arrival: its map, once (points of another frame)
+            self._deliver = False
+            return torch.stack(commit.maps).amax(dim=0)
         if commit is not None and present == commit.step:
             return commit.maps[square]
         if commit is not None and present == commit.at_step:  # an earlier step's candidate: the one call left

@@ -22,7 +22,8 @@ from typing import Any
 import numpy as np
 
 from pin_match import atomic
-from pin_match.data.importer import APPROACH, LABELS, PIN_CAMERA_HEIGHT, PIN_HFOV_DEG, POSES, TARGET_ID
+from pin_match.data.agent import CAMERA_HEIGHT, HFOV_DEG
+from pin_match.data.importer import APPROACH, LABELS, POSES, TARGET_ID
 from pin_match.errors import PinMatchError
 from pin_match.pin_agent.episode import episode_record, labels_in_episode
 
@@ -46,8 +47,8 @@ class FrameRecorder:
     ``camera_height`` are the RGB camera's (PIN's: 42 degrees, 1.31 m), written beside each episode's poses.
     """
 
-    def __init__(self, root: str | Path, *, split: str | None = None, hfov_deg: float = PIN_HFOV_DEG,
-                 camera_height: float = PIN_CAMERA_HEIGHT) -> None:
+    def __init__(self, root: str | Path, *, split: str | None = None, hfov_deg: float = HFOV_DEG,
+                 camera_height: float = CAMERA_HEIGHT) -> None:
         self.root = atomic.ensure_dir(root)
         self.split = split
         self.camera = {"hfov_deg": float(hfov_deg), "camera_height": float(camera_height)}

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from pin_match.data.agent import MAX_STEPS
+
 
 @dataclass(frozen=True)
 class SynthSize:
@@ -15,10 +17,17 @@ class SynthSize:
     seed: int = 0
     episodes: int = 30
     objects_per_family: int = 5
-    frames_per_episode: int = 96  # the exploration's step budget (PIN's episodes: up to 1,000 steps)
+    frames_per_episode: int = MAX_STEPS  # the tour's step budget: PIN's episode limit (it ends sooner, when done)
     splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
     walk: str = "explore"  # "explore": blind to the target, one per house; "approach": heads for the target
-    approach_views: bool = True  # what an agent sees walking up to each annotated object, after the walk's frames
+
+
+GENERATOR = "pin_match.data.synth"  # the provenance's ``generator`` of a set this package's generator wrote
+
+
+def made_by_generator(manifest: dict) -> bool:
+    """Was the set written by the synthetic generator (its houses can be staged again, if this install made it)?"""
+    return (manifest.get("provenance") or {}).get("generator") == GENERATOR
 
 
 WALKS = ("explore", "approach")  # an exploration blind to the target, one a house; a walk that heads for it

@@ -1,10 +1,9 @@
 """A PIN agent's camera walks, with PIN's discrete actions (0.25 m forward, turns of at most 30 degrees) along
-breadth-first paths on a 10 cm occupancy grid (never through furniture or walls).
+breadth-first paths on a 10 cm occupancy grid (never through furniture or walls): the grid, the walker (``_Walk``)
+and the helpers every walk shares.
 
-The default walk, ``exploration_walk``, does not know the target: a look-around, then a tour of
-the house's furniture, nearest first, until its step budget is spent. Every object's episode in a
-house reads that one walk, so targets and look-alikes come in any order, far or near, and the
-walk ends where the exploration does, not beside the target.
+The default walk, the exploration that does not know the target, is a tour of the whole house
+(``tour.exploration_walk``): every episode of a house reads that one walk.
 
 The walk that heads for the target, ``camera_walk`` (``--walk approach``), is a successful agent's
 walk: the target is seen far, then near, and the episode ends within about 1 m of it, facing it,
@@ -215,121 +214,6 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
     return walk.poses
 
 
-def exploration_walk(room: Room, obstacles: list[tuple[float, float, float, float]],
-                     away_from: Sequence[tuple[float, float]], n_frames: int, rng: np.random.Generator,
-                     ) -> list[Pose]:
-    """An exploration that does not know the target (``--walk explore``, the default): at most ``n_frames`` poses.
-
-    A look-around where it starts, then a tour of the house's furniture, nearest first by walk: at
-    each piece it stands ``VIEW_DISTANCE`` in front of it, turns to face it and looks at each of its
-    surfaces (tilting down or up as an agent's look-down action, one frame per distinct tilt), then
-    walks on. It reads the house (rooms, furniture) and never which object is the target, so every
-    object's episode in the house reads the same walk; targets and look-alikes come in whatever order
-    and at whatever distance the tour passes them. The walk ends when the budget is spent or every piece
-    was looked at. It starts in the room at the end of the house (a house is a row of rooms) farther on average
-    from the points ``away_from`` (the house's annotated objects, any of which may be a target), ``START_AWAY`` or
-    more of walk from every one of them where the room has such a cell, else at the cell farthest from them (PIN
-    draws a start away from its goal): so the targets lie one or two rooms away as often as in PIN's houses.
-    """
-    grid = Grid(room, obstacles)
-    end_room = max((room.rooms[0], room.rooms[-1]), key=lambda r: float(np.mean(
-        [np.hypot((r[0] + r[2]) / 2 - x, (r[1] + r[3]) / 2 - y) for x, y in away_from] or [0.0]))) \
-        if room.rooms else None
-    start, reachable = _start(grid, rng, away_from, weighted=False, within=end_room)
-    walk = _Walk(grid, Grid(room, obstacles, NEAR_CLEARANCE), reachable, rng, grid.centre(start),
-                 float(rng.uniform(-np.pi, np.pi)), None)
-    walk.look_around(int(rng.integers(3, 7)))
-    views = _viewpoints(room, grid, {tuple(int(v) for v in c) for c in reachable})
-    while views and len(walk.poses) < n_frames:
-        lengths = grid.path_lengths(grid.cell(walk.pos))
-        k = int(np.argmin([lengths[v.cell] for v in views]))
-        walk.look_at(views.pop(k), n_frames)
-    return walk.poses[:n_frames]
-
-
-@dataclass(frozen=True)
-class _View:
-    """Where the tour stands to look at one piece of furniture: a free cell, the headings that sweep the piece from end
-    to end and the surfaces' points."""
-
-    cell: tuple[int, int]
-    headings: tuple[float, ...]
-    looks: tuple[Goal, ...]
-
-
-VIEW_DISTANCE = 0.5  # metres between the front edge of a piece of furniture and where the tour looks at it from
-
-
-def _viewpoints(room: Room, grid: Grid, reachable: set[tuple[int, int]]) -> list[_View]:
-    """One view per piece of furniture with a front (its surfaces share one footprint): the reachable cell nearest the
-    spot ``VIEW_DISTANCE`` in front of it; a piece with no reachable cell within 0.8 m of that spot is skipped."""
-    pieces: dict[tuple[float, float, float], list] = {}
-    for s in room.surfaces:
-        if s.facing is not None:
-            pieces.setdefault((round((s.x0 + s.x1) / 2, 1), round((s.y0 + s.y1) / 2, 1), s.facing), []).append(s)
-    cells = np.array(sorted(reachable))
-    centres = (cells + 0.5) * CELL
-    out = []
-    for (cx, cy, facing), surfaces in pieces.items():
-        front = np.array([np.cos(facing), np.sin(facing)])
-        half = max(abs(front[0]) * (s.x1 - s.x0) + abs(front[1]) * (s.y1 - s.y0) for s in surfaces) / 2
-        spot = np.array([cx, cy]) + front * (half + VIEW_DISTANCE)
-        gap = np.hypot(*(centres - spot).T)
-        if gap.min() > 0.8:
-            continue
-        cell = tuple(int(v) for v in cells[int(np.argmin(gap))])
-        at = grid.centre(cell)
-        looks = tuple(Goal(cx, cy, s.z + 0.1, 0.0) for s in surfaces)
-        out.append(_View(cell, _sweep(at, np.array([cx, cy]), front, surfaces), looks))
-    return out
-
-
-def _sweep(at: np.ndarray, centre: np.ndarray, front: np.ndarray, surfaces: list) -> tuple[float, ...]:
-    """Headings from ``at`` that cover a piece from one end to the other, a turn apart (just its centre's when the
-    whole piece fits the view)."""
-    along = np.array([-front[1], front[0]])
-    half = max(abs(along[0]) * (s.x1 - s.x0) + abs(along[1]) * (s.y1 - s.y0) for s in surfaces) / 2
-    ends = [float(np.arctan2(*(centre + along * side * half - at)[::-1])) for side in (-1.0, 1.0)]
-    mid = float(np.arctan2(*(centre - at)[::-1]))
-    span = abs(_wrap(ends[1] - ends[0]))
-    turns = int(np.ceil(max(span - HALF_HFOV * 2 + np.radians(6), 0.0) / TURN))
-    if not turns:
-        return (mid,)
-    first = _wrap(mid - turns * TURN / 2 * np.sign(_wrap(ends[1] - ends[0])))
-    return tuple(_wrap(first + k * TURN * np.sign(_wrap(ends[1] - ends[0]))) for k in range(turns + 1))
-
-
-APPROACH_BACK = (1.0, 0.5, 0.0)  # metres of walk before the standing point at which an approach view is taken
-APPROACH_RANGE = 2.5  # metres: a view farther than this from the object (horizontally) is not a close look
-
-
-def approach_poses(floor: FloorMap, walk: Sequence[Pose], centre: Sequence[float]) -> list[tuple[Pose, float]]:
-    """What an agent sees walking up to an object to check it, far to near: from the walk's pose nearest the object
-    along the floor map's shortest walk to where it stands beside it (``FloorMap.stand``), a view ``APPROACH_BACK``
-    metres of walk before the standing point, facing the object's centre (tilted to centre it), each with its
-    horizontal distance to the centre; views beyond ``APPROACH_RANGE`` are left out.
-
-    One approach per object, not per point the agent might leave its walk from: the nearest pose stands for every
-    departure (docs/synthetic.md)."""
-    xy = np.array([pose[:2] for pose in walk], np.float64)
-    goal = np.asarray(centre[:2], np.float64)
-    start = xy[int(np.argmin(np.hypot(*(xy - goal).T)))]
-    path = floor.path(start, floor.stand(goal, start))
-    along = np.r_[0.0, np.cumsum(np.hypot(*np.diff(path, axis=0).T))]
-    look = Goal(float(goal[0]), float(goal[1]), float(centre[2]), 0.0)
-    out = []
-    for back in APPROACH_BACK:
-        if back > along[-1] + 1e-9:
-            continue
-        eye = np.array([np.interp(along[-1] - back, along, path[:, 0]), np.interp(along[-1] - back, along, path[:, 1])])
-        distance = float(np.hypot(*(goal - eye)))
-        if distance > APPROACH_RANGE:
-            continue
-        yaw = float(np.arctan2(*(goal - eye)[::-1])) if distance > 1e-9 else float(walk[0][2])
-        out.append(((float(eye[0]), float(eye[1]), yaw, _pitch_for(eye, look, centre=True)), distance))
-    return out
-
-
 def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, float]], start: Sequence[float],
                      goals: Sequence[Sequence[float]]) -> list[float]:
     """PIN's ``geodesic_distance`` from ``start`` (x, y) to each goal (x, y): the shortest walk on the camera's grid
@@ -346,22 +230,22 @@ def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, floa
 def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, float]],
            weighted: bool = True, within: tuple[float, float, float, float] | None = None,
            ) -> tuple[tuple[int, int], np.ndarray]:
-    """A start cell in a large connected part of the floor (inside the rectangle ``within`` where given), and the
-    cells reachable from it.
+    """A start cell on the main floor (the largest connected part: a corner that furniture and floor objects wall off
+    would keep the walk in it), inside the rectangle ``within`` where that holds cells, and the main floor's cells.
 
     Never within reach of a target: a start cell lies ``START_AWAY`` or more of walk from each of
     ``targets`` (straight distance where a target's cell reaches no free cell), drawn uniformly or, where
     ``weighted``, with weight its distance to the nearest, so the farther corners of the room, where PIN's
     long episodes would start, come first. A room too small for that starts at its farthest cell.
     """
-    cells = np.argwhere(grid.free)
+    if not grid.free.any():
+        raise ValueError("room has no free floor for the camera")
+    cells = main = _main_floor(grid)
     if within is not None:
         x0, y0, x1, y1 = within
         centres = (cells + 0.5) * CELL
         inside = (centres[:, 0] > x0) & (centres[:, 0] < x1) & (centres[:, 1] > y0) & (centres[:, 1] < y1)
         cells = cells[inside] if inside.any() else cells
-    if not len(cells):
-        raise ValueError("room has no free floor for the camera")
     away = np.full(len(cells), np.inf)
     for target in targets:
         walked = grid.lengths_to(target)[cells[:, 0], cells[:, 1]]
@@ -369,14 +253,19 @@ def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, 
                                          np.hypot(*((cells + 0.5) * CELL - np.asarray(target)).T)))
     far = np.flatnonzero(away >= START_AWAY)
     weights = away[far] / away[far].sum() if len(far) and weighted else None
-    reach: dict = {}
-    for _ in range(20):
-        k = int(rng.choice(far, p=weights)) if len(far) else int(np.argmax(away))
-        start = tuple(int(v) for v in cells[k])
-        reach = grid.bfs(start)
-        if len(reach) > 0.3 * len(cells):
-            break
-    return start, np.array(list(reach))
+    k = int(rng.choice(far, p=weights)) if len(far) else int(np.argmax(away))
+    return (int(cells[k][0]), int(cells[k][1])), main
+
+
+def _main_floor(grid: Grid) -> np.ndarray:
+    """The cells of the largest connected part of the grid's free floor, sorted."""
+    left = {(int(i), int(j)) for i, j in np.argwhere(grid.free)}
+    best: set[tuple[int, int]] = set()
+    while len(left) > len(best):
+        part = set(grid.bfs(min(left)))
+        best = max(best, part, key=len)
+        left -= part
+    return np.array(sorted(best))
 
 
 def _pitch_for(eye: np.ndarray, look: Goal, centre: bool) -> float:
@@ -435,26 +324,6 @@ class _Walk:
             self.go_to(goal, budget)
             if len(self.poses) < budget:
                 self.turn_to(float(self.rng.uniform(-np.pi, np.pi)))
-
-    def look_at(self, view: _View, budget: int) -> None:
-        """Walk to a view, face its furniture and look along it: one heading per turn from the end nearer its heading
-        to the other (a wide table does not fit the 42 degree view), each at the tilt that brings the piece's surfaces
-        into view (their mean height)."""
-        self.go_to(view.cell, budget)
-        if len(self.poses) >= budget or self.grid.cell(self.pos) != view.cell:
-            return
-        look = Goal(view.looks[0].x, view.looks[0].y, float(np.mean([g.z for g in view.looks])), 0.0)
-        tilt = _pitch_for(self.pos, look, centre=False)
-        headings = view.headings
-        if abs(_wrap(headings[-1] - self.yaw)) < abs(_wrap(headings[0] - self.yaw)):
-            headings = headings[::-1]
-        for yaw in headings:
-            self.pitch = 0.0
-            self.turn_to(yaw)
-            if tilt != 0.0 or self.poses[-1][2:] != (self.yaw, 0.0):
-                self.pitch = tilt
-                self.emit()
-        self.pitch = 0.0
 
     def approach(self, look: Goal, run: tuple[float, float], stop: bool) -> None:
         """Walk to a spot ``run`` metres further out than the stop, then straight at ``look``, facing it each step."""

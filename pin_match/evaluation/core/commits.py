@@ -94,16 +94,19 @@ def commit_metrics(rows: pd.DataFrame, clusters: Clusters | None = None, boot: B
     return dict(metrics={k: to_python(v) for k, v in point.items()}, ci95=ci, n_episodes=len(rows))
 
 
-def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH) -> dict[str, float]:
+def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATCH,
+                   decisions: list[Decision] | None = None) -> dict[str, float]:
     """PIN's counts and metrics with "matched" read as "found under the policy", plus how long it looked.
 
     ``frames_to_first_match``: the mean, over episodes where something is found, of the 1-based position of the
     first found frame (for a look-further policy, the frame it commits to), NaN where nothing is found;
     ``frames_looked_at``: ``commit_shares``' (the 1-based frame where the agent committed, the whole walk where it
-    never does). ``look:0`` gives PIN's rule exactly (``LookFurther.found``).
+    never does). ``look:0`` gives PIN's rule exactly (``LookFurther.found``). ``decisions``: the policy's, where the
+    caller made them with what the house says (``navigation.walk_decisions``), so these metrics and the navigation
+    estimate read one outcome.
     """
     arr = as_arrays(scored)
-    found = found_frames(arr, sigma, policy)
+    found = found_frames(arr, sigma, policy, decisions)
     out = threshold_metrics(fired_arrays(arr, found), 0.5)
     first = np.flatnonzero(found)
     if first.size:
@@ -111,7 +114,7 @@ def policy_metrics(scored: Scored, sigma: float, policy: StopPolicy = FIRST_MATC
         out["frames_to_first_match"] = float(np.mean(first - np.searchsorted(arr.episode, arr.episode[first]) + 1))
     else:
         out["frames_to_first_match"] = math.nan
-    out["frames_looked_at"] = commit_shares(commitments(arr, sigma, policy))["frames_looked_at"]
+    out["frames_looked_at"] = commit_shares(commitments(arr, sigma, policy, decisions))["frames_looked_at"]
     return out
 
 
@@ -120,18 +123,19 @@ STOP_COLUMNS = ["episode_id", "first_step", "first_class", "first_score", "stop_
                 "peak_step", "peak_score", "peak_level", "peak_offset"]
 
 
-def episode_stops(arr: FrameArrays, sigma: float, policy: StopPolicy) -> pd.DataFrame:
+def episode_stops(arr: FrameArrays, sigma: float, policy: StopPolicy,
+                  decisions: list[Decision] | None = None) -> pd.DataFrame:
     """Per episode (``STOP_COLUMNS``): PIN's first match at sigma (step: the frame's 0-based position in its episode,
     class, score); where the policy fired (the window opened, ``Decision.fired``), the house's level there
     (``policy.level``, NaN without one) and the line the frame reached; where it stopped looking (``commit_step``),
     the frame it committed to and every candidate it weighed (``step:score``, ``;``-separated); and the target's best
     frame: its score, the level before it and how far above it the target came (its offset). None where there is no
-    such frame."""
+    such frame. ``decisions``: as for ``policy_metrics``."""
     level, line = policy.level(arr), policy.line(arr, sigma)
     first = arr.score >= sigma
     target = arr.cls == TM
     rows = []
-    for (start, end), decision in zip(episode_bounds(arr), policy.decide(arr, sigma)):
+    for (start, end), decision in zip(episode_bounds(arr), decisions or policy.decide(arr, sigma)):
         row = dict(episode_id=str(arr.episode_ids[arr.episode[start]]))
         hit = np.flatnonzero(first[start:end])
         row |= _frame_fields(arr, "first", start + int(hit[0]) if hit.size else None, start)

@@ -11,6 +11,7 @@ of several matchers builds the labels once without threading them through every 
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
 from pathlib import Path
@@ -31,9 +32,10 @@ from pin_match.evaluation.core.metrics import (
     localisation_metrics,
     per_category,
 )
-from pin_match.evaluation.core.navigation import Placements, episodes_at, navigation_metrics, walk_decisions
+from pin_match.evaluation.core.navigation import episodes_at, navigation_metrics, walk_decisions
+from pin_match.evaluation.core.placements import Placements, WalkUpViews
 from pin_match.evaluation.core.sigma import SigmaChoice, way_out
-from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, describe
+from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy, describe
 from pin_match.scoring.table import ScoreTable
 
 
@@ -52,12 +54,15 @@ def check_frameset(table: ScoreTable, fs: FrameSet) -> None:
 class EvalContext:
     """One frame-set as every evaluation step of a run reads it: labels built once, each scored split once.
 
-    ``boot`` resamples every interval the run computes.
+    ``boot`` resamples every interval the run computes. ``walk_ups``: where a table's walk-up views come from, for
+    an approach-verify policy (``scoring.walkups.walkup_scorer``: rendered and scored by the table's matcher).
     """
 
-    def __init__(self, fs: FrameSet, boot: Bootstrap = DEFAULT_BOOT) -> None:
+    def __init__(self, fs: FrameSet, boot: Bootstrap = DEFAULT_BOOT,
+                 walk_ups: Callable[[ScoreTable], WalkUpViews | None] | None = None) -> None:
         self.fs = fs
         self.boot = boot
+        self.walk_ups = walk_ups
         self._scored: dict[tuple[int, str | None], tuple[ScoreTable, pd.DataFrame, FrameArrays]] = {}
         self._placements: dict[tuple[int, str | None], Placements] = {}
 
@@ -96,7 +101,8 @@ class EvalContext:
         key = (id(table), None if split in (None, "all") else split)
         if key not in self._placements:
             _, scored, arr = self._split(table, split)
-            self._placements[key] = Placements(self.fs, scored, arr, table.frames, self.approach_scored(table, split))
+            self._placements[key] = Placements(self.fs, scored, arr, table.frames, self.approach_scored(table, split),
+                                               None if self.walk_ups is None else self.walk_ups(table))
         return self._placements[key]
 
     def approach_scored(self, table: ScoreTable, split: str | None) -> pd.DataFrame:
@@ -134,6 +140,7 @@ class Evaluation:
     walks: pd.DataFrame | None = None  # per episode, where the agent stopped (``navigation``); None without geometry
     policy: StopPolicy = FIRST_MATCH  # the stop policy the navigation estimate and the commitments are read under
     commits: pd.DataFrame | None = None  # per episode, what the policy committed to (``commits``); None for PIN's rule
+    decisions: list[Decision] | None = None  # the policy's, made once with what the house says (None without geometry)
 
 
 def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice, split: str | None = "val",
@@ -155,8 +162,8 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
         ci95.update(estimate.pop("ci95"))
         navigation = {"policy": describe(policy), **estimate}
     commits = None
+    decisions = None if walks is None else walk_decisions(ctx.placements(table, split), sigma.value, policy)[0]
     if policy != FIRST_MATCH:
-        decisions = None if walks is None else walk_decisions(ctx.placements(table, split), sigma.value, policy)[0]
         commits = commitments(arr, sigma.value, policy, decisions)
         committed = commit_metrics(commits, ctx.clusters, ctx.boot)
         metrics.update(committed["metrics"])
@@ -165,7 +172,7 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
                   modality=table.meta.get("modality"), frameset_fingerprint=ctx.fs.fingerprint, split=split or "all",
                   **sigma.as_dict(), policy=str(policy), metrics=metrics, ci95=ci95, navigation=navigation,
                   n_bootstrap=ctx.boot.n_boot, date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
-    return Evaluation(result, per_category(arr, sigma.value), scored, arr, walks, policy, commits)
+    return Evaluation(result, per_category(arr, sigma.value), scored, arr, walks, policy, commits, decisions)
 
 
 def table_subset(table: ScoreTable, frame_ids: pd.Series) -> ScoreTable:

@@ -26,16 +26,16 @@ Pure functions of a score table, its frame-set (geometry, depth, masks) and a st
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+import weakref
 
 import numpy as np
 import pandas as pd
 
-from pin_match.data.frameset import FrameSet
-from pin_match.data.geometry import AGENT_RADIUS, EpisodeGeometry, Geometry
-from pin_match.errors import PinMatchError
+from pin_match.data.agent import FORWARD_STEP, MAX_STEPS, TURN
+from pin_match.data.geometry import AGENT_RADIUS, EpisodeGeometry
 from pin_match.evaluation.core.intervals import Clusters, per_episode_intervals
-from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, FrameArrays, to_python
+from pin_match.evaluation.core.metrics import DEFAULT_BOOT, Bootstrap, to_python
+from pin_match.evaluation.core.placements import NavigationError, Placements
 from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     ApproachVerify,
@@ -47,145 +47,24 @@ from pin_match.evaluation.core.stop import (
 )
 
 SUCCESS_DISTANCE = 1.0  # metres: PIN's success (and category-error) radius
-FORWARD_STEP = 0.25  # metres per forward action
-TURN = math.radians(30.0)  # one turn action
-DEPTH_RANGE = (0.5, 5.0)  # PIN's depth sensor, metres: below the first or at the second a pixel has no depth
 STAND_MARGIN = 0.1  # metres: without a floor map the agent stops this far beyond its radius short of the goal point
-ON_OBJECT = 0.5  # metres: a goal point this near an object's centre is on it (its approach views are the close look)
-REMEMBERED_CELL = 0.5  # metres: a rejected goal on no object is remembered as its floor cell of this size
-ABOUT_FACE = 6  # turns of 30 degrees: the agent turns back to its walk after rejecting a candidate
-MAX_STEPS = 1000  # PIN's episode ends here: a stop not called within this many steps is no stop
+ABOUT_FACE = 6  # turns of 30 degrees: the agent turns back to its walk after rejecting a candidate (no floor map)
 
 OUTCOMES = ("success", "category error", "other stop", "not found")
 NAVIGATION_KEYS = ("sr", "spl", "ce", "d2g", "steps")  # PIN's column order
 SHARE_KEYS = ("not_found_pct", "unplaced_pct")
 EPISODE_SHARES = ("sr", "ce", *SHARE_KEYS)  # the % of episodes with a yes/no outcome (their intervals: intervals.py)
-REJECTION_KEYS = ("rejections", "rejected_target_pct", "rejected_lookalike_pct")
+REJECTION_KEYS = ("rejections", "rejected_target_pct", "rejected_lookalike_pct", "rejected_other_pct",
+                  "rejected_nothing_pct")
 EPISODE_COLUMNS = ["episode_id", "target_object_id", "outcome", "stop_frame_id", "stop_step", "point_frame_id",
                    "landed_on", "point_x", "point_y", "point_z", "stand_x", "stand_y", "d2g", "path", "geodesic", "spl",
                    "steps", "unplaced_candidates", "fired_step", "candidates", "rejected", "rejected_target",
-                   "rejected_lookalike", "rejections"]
-
-
-class NavigationError(PinMatchError, ValueError):
-    """A frame-set or score table on which the navigation estimate cannot be made."""
-
-
-@dataclass(frozen=True)
-class FramePoints:
-    """One frame's stored points with what placing them needs: their scores, house-frame positions (NaN where the
-    depth is outside PIN's range) and what each landed on in the instance mask."""
-
-    scores: np.ndarray  # (K,)
-    xyz: np.ndarray  # (K, 3)
-    roles: np.ndarray  # (K,) object role at the point's pixel, "background" where none
-
-
-class Placements:
-    """A scored split's frames in walk order, with each frame's points placed in the house on first use.
-
-    Built once per (table, split) and asked at any sigma, so a sweep reads each frame's depth once.
-    """
-
-    def __init__(self, fs: FrameSet, scored: pd.DataFrame, arr: FrameArrays, table_frames: pd.DataFrame,
-                 approach: pd.DataFrame | None = None) -> None:
-        reason = fs.navigation_missing
-        if reason is not None:
-            raise NavigationError(f"no navigation estimate on {fs.root}: {reason}")
-        self.fs = fs
-        self.geometry: Geometry = fs.geometry  # type: ignore[assignment]  # present: navigation_missing is None
-        codes = pd.factorize(scored["episode_id"], sort=False)[0]
-        order = np.lexsort((scored["step"].to_numpy(), codes))  # the order of ``metrics.frame_arrays``
-        self.frame_ids = scored["frame_id"].to_numpy()[order]
-        self.steps = scored["step"].to_numpy(np.int64)[order]
-        self.arrays = arr  # the same frames in the same order: the stop policy reads its scores
-        self.rows = table_frames.set_index("frame_id")
-        poses = self.geometry.poses.loc[self.frame_ids]
-        self.xy = poses[["pose_x", "pose_y"]].to_numpy(np.float64)
-        self.yaw = poses["pose_yaw"].to_numpy(np.float64)
-        moved = np.r_[0.0, np.hypot(*np.diff(self.xy, axis=0).T)]
-        moved[np.r_[True, np.diff(arr.episode) != 0]] = 0.0
-        self.walked = _cumsum_by_episode(moved, arr.episode)  # metres walked up to each frame
-        self._points: dict[str, FramePoints] = {}
-        self._roles = _role_values(fs)
-        # read per stop at every sigma of a sweep: looked up in dicts, not in the tables
-        self.category = dict(zip(fs.objects.object_id, fs.objects.category.astype(str)))
-        self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
-        self.views = _approach_views(fs, approach)
-        self.walks: dict[tuple[int, bytes], tuple[np.ndarray, float, int]] = {}  # ``_walk_to``'s, by frame and point
-        self.decided: tuple[tuple[float, StopPolicy], Made] | None = None  # ``walk_decisions``' last, with its key
-
-    def close_look(self, frame: int, placed: tuple[np.ndarray, str]) -> CloseLook:
-        """Frame ``frame``'s candidate, placed at ``placed``'s goal point, as an agent walking up to it meets it: the
-        approach views of the object the goal is on (its centre within ``ON_OBJECT``), remembered as that object;
-        a goal on no such object has no views and is remembered as its floor cell."""
-        episode_id = str(self.arrays.episode_ids[self.arrays.episode[frame]])
-        goal = placed[0]
-        positions = self.geometry.episodes[episode_id].positions
-        if positions:
-            ids = list(positions)
-            gaps = np.linalg.norm(np.asarray([positions[i] for i in ids], np.float64) - goal, axis=1)
-            nearest = int(np.argmin(gaps))
-            if gaps[nearest] <= ON_OBJECT:
-                return CloseLook(ids[nearest], self.views.get((episode_id, ids[nearest]), ()))
-        return CloseLook(("cell", *np.floor(goal[:2] / REMEMBERED_CELL).astype(int).tolist()))
-
-    def points(self, frame_id: str) -> FramePoints:
-        if frame_id not in self._points:
-            row = self.rows.loc[frame_id]
-            xy = np.stack([np.asarray(row["points_x"], np.float64), np.asarray(row["points_y"], np.float64)], 1)
-            depth, mask = self.fs.depth(frame_id), self.fs.instance_mask(frame_id)
-            px = np.clip(np.floor(xy[:, 0]).astype(np.int64), 0, depth.shape[1] - 1)
-            py = np.clip(np.floor(xy[:, 1]).astype(np.int64), 0, depth.shape[0] - 1)
-            d = depth[py, px].astype(np.float64)
-            xyz = self.geometry.back_project(frame_id, xy, d)
-            xyz[(d < DEPTH_RANGE[0]) | (d >= DEPTH_RANGE[1])] = np.nan  # a clipping sensor puts its far pixels at 5 m
-            roles = self._roles.get(frame_id, {})
-            self._points[frame_id] = FramePoints(np.asarray(row["point_scores"], np.float64), xyz,
-                                                 np.array([roles.get(int(v), "background") for v in mask[py, px]],
-                                                          dtype=object))
-        return self._points[frame_id]
-
-    def place(self, frame_id: str, sigma: float) -> tuple[np.ndarray, str] | None:
-        """Where the agent would walk from this matched frame: the median of its placeable points at sigma, and
-        what the point nearest it landed on; None when no point above sigma has depth in PIN's range."""
-        p = self.points(frame_id)
-        keep = (p.scores >= sigma) & ~np.isnan(p.xyz[:, 0])
-        if not keep.any():
-            return None
-        xyz = p.xyz[keep]
-        goal = np.median(xyz, axis=0)
-        return goal, str(p.roles[keep][int(np.argmin(np.linalg.norm(xyz - goal, axis=1)))])
-
-
-def _approach_views(fs: FrameSet, approach: pd.DataFrame | None) -> dict[tuple[str, str], tuple]:
-    """Per (episode, object), its scored approach views as (distance, score), far to near."""
-    if approach is None or approach.empty:
-        return {}
-    rows = fs.approach_views.set_index("frame_id").loc[approach.frame_id, ["approach_of", "approach_distance", "step"]]
-    table = pd.DataFrame({"episode_id": approach.episode_id.to_numpy(), "object_id": rows.approach_of.to_numpy(),
-                          "distance": rows.approach_distance.to_numpy(np.float64),
-                          "score": approach.score.to_numpy(np.float64), "step": rows.step.to_numpy()})
-    return {(str(e), str(o)): tuple(zip(group.distance.tolist(), group.score.tolist()))
-            for (e, o), group in table.sort_values("step").groupby(["episode_id", "object_id"], sort=False)}
-
-
-def _cumsum_by_episode(values: np.ndarray, episode: np.ndarray) -> np.ndarray:
-    total = np.cumsum(values)
-    starts = np.flatnonzero(np.r_[True, np.diff(episode) != 0]) if len(values) else np.zeros(0, np.int64)
-    before = np.r_[0.0, total][starts]
-    return total - np.repeat(before, np.diff(np.r_[starts, len(values)]))
-
-
-def _role_values(fs: FrameSet) -> dict[str, dict[int, str]]:
-    vis = fs.visibility
-    out: dict[str, dict[int, str]] = {}
-    for frame_id, value, role in zip(vis.frame_id, vis.mask_value, vis.role):
-        out.setdefault(frame_id, {})[int(value)] = role
-    return out
+                   "rejected_lookalike", "rejected_other", "rejected_nothing", "rejections"]
 
 
 Made = tuple[list[Decision], dict[int, tuple[np.ndarray, str] | None], Verify | None]  # ``walk_decisions``'
+_LAST_DECIDED: weakref.WeakKeyDictionary[Placements, tuple[tuple[float, StopPolicy], Made]] = \
+    weakref.WeakKeyDictionary()  # per placements, ``walk_decisions``' last, with its key
 
 
 def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> pd.DataFrame:
@@ -194,7 +73,7 @@ def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MAT
     decisions, placed, verify = walk_decisions(places, sigma, policy)
     rows = []
     for (start, end), decision in zip(episode_bounds(places.arrays), decisions):
-        row = _episode(places, decision, start, end, placed)
+        row = _episode(places, decision, start, end, placed, isinstance(policy, ApproachVerify))
         if isinstance(policy, ApproachVerify):
             row |= _rejections(places, policy, decision, placed, verify)  # type: ignore[arg-type]
         rows.append(row)
@@ -203,14 +82,17 @@ def episodes_at(places: Placements, sigma: float, policy: StopPolicy = FIRST_MAT
 
 def walk_decisions(places: Placements, sigma: float, policy: StopPolicy = FIRST_MATCH) -> Made:
     """The policy's decisions on the walks (``StopPolicy.decide``), a candidate placeable where its points at the
-    frame's line have depth in range, an approach-verify policy's close looks read from the approach views
-    (``Placements.close_look``); with the placed candidates and the close looks, for the rows built from them.
-    The last one is kept on ``places``: a report's rows (``episodes_at``) and its commit table ask for the same
+    frame's line have depth in range, an approach-verify policy's close looks from its walk-ups
+    (``Placements.close_look``): an episode that walks up to a candidate whose views are not scored yet waits, the
+    views every waiting episode asked for are rendered and scored together (``WalkUpViews.resolve``), and all decide
+    again, until none waits; with the placed candidates and the close looks, for the rows built from them.
+    The last one is kept per placements: a report's rows (``episodes_at``) and its commit table ask for the same
     decisions one after the other, and they are made once."""
     key = (float(sigma), policy)
-    if places.decided is None or places.decided[0] != key:
-        places.decided = key, _decide(places, sigma, policy)
-    return places.decided[1]
+    last = _LAST_DECIDED.get(places)
+    if last is None or last[0] != key:
+        last = _LAST_DECIDED[places] = key, _decide(places, sigma, policy)
+    return last[1]
 
 
 def _decide(places: Placements, sigma: float, policy: StopPolicy) -> Made:
@@ -223,12 +105,45 @@ def _decide(places: Placements, sigma: float, policy: StopPolicy) -> Made:
             placed[frame] = places.place(places.frame_ids[frame], float(line[frame]))
         return placed[frame] is not None
 
-    verify: Verify | None = None
-    if isinstance(policy, ApproachVerify):
-        def verify(frame: int) -> CloseLook:
-            return places.close_look(frame, placed[frame])  # type: ignore[arg-type]  # a verified candidate is placed
+    verify = _verifier(places, policy, placed)
+    while True:  # a walk-up not rendered yet leaves its episode waiting: render and score them all, decide again
+        decisions = policy.decide(arr, sigma, placeable, verify=verify)
+        if verify is None or places.walkups is None:
+            return decisions, placed, verify
+        for (_, end), decision in zip(episode_bounds(arr), decisions):
+            if decision.approaching is not None:
+                _ask_ahead(arr.score >= line, decision.approaching, end, placeable, verify)
+        if not places.walkups.resolve():
+            return decisions, placed, verify
 
-    return policy.decide(arr, sigma, placeable, verify=verify), placed, verify
+
+def _verifier(places: Placements, policy: StopPolicy,
+              placed: dict[int, tuple[np.ndarray, str] | None]) -> Verify | None:
+    """An approach-verify policy's close looks (None for any other policy); a set with nothing to walk up to says so."""
+    if not isinstance(policy, ApproachVerify):
+        return None
+    if places.walkups is None and not places.views:
+        raise NavigationError(f"stop policy {policy} walks up to each candidate, but {places.fs.root} has no "
+                              "walk-ups: a synthetic set renders them when its matcher is given (pin-match tune / "
+                              "report / bench / trade do), a PIN recording has the approach views it recorded, "
+                              "and a set with neither cannot show what walking up would have seen")
+
+    def verify(frame: int) -> CloseLook:
+        return places.close_look(frame, placed[frame], policy.distance)  # type: ignore[arg-type]  # placed
+
+    return verify
+
+
+PREFETCH = 6  # an episode waiting on a walk-up asks for the next candidates' too: one round of rendering, not six
+
+
+def _ask_ahead(counted: np.ndarray, waiting: int, end: int, placeable, verify: Verify) -> None:
+    """Ask for the walk-ups of the next ``PREFETCH`` placeable candidates after ``waiting`` in its episode, which the
+    agent walks up to if it rejects the one it waits on: computing ahead, never deciding ahead (a view asked for is
+    read only when the decision reaches its candidate)."""
+    ahead = [int(t) for t in np.flatnonzero(counted[waiting + 1:end]) + waiting + 1]
+    for frame in [t for t in ahead if placeable(t)][:PREFETCH]:
+        verify(frame)
 
 
 def _rejections(places: Placements, policy: ApproachVerify, decision: Decision,
@@ -242,16 +157,17 @@ def _rejections(places: Placements, policy: ApproachVerify, decision: Decision,
         roles.append(role)
         texts.append(f"{int(places.steps[candidate])}:{role}:{close:.3f}")
     return dict(rejected=len(roles), rejected_target=roles.count("target"),
-                rejected_lookalike=roles.count("same_category"), rejections="; ".join(texts) or None)
+                rejected_lookalike=roles.count("same_category"), rejected_other=roles.count("other"),
+                rejected_nothing=roles.count("background"), rejections="; ".join(texts) or None)
 
 
 def _episode(places: Placements, decision: Decision, start: int, end: int,
-             placed: dict[int, tuple[np.ndarray, str] | None]) -> dict:
+             placed: dict[int, tuple[np.ndarray, str] | None], walked_up: bool) -> dict:
     episode_id = str(places.arrays.episode_ids[places.arrays.episode[start]])
     geometry = places.geometry.episodes[episode_id]
     target_id = places.target[episode_id]
     if decision.chosen is not None:
-        return _within_budget(_stop(places, geometry, episode_id, target_id, decision, placed))
+        return _within_budget(_stop(places, geometry, episode_id, target_id, decision, placed, walked_up))
     last = end - 1
     target = np.asarray(geometry.positions[target_id])
     position = np.r_[places.xy[last], geometry.start.z]  # where it stands when the walk ends, on the floor
@@ -277,12 +193,17 @@ def _within_budget(row: dict) -> dict:
 
 
 def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target_id: str, decision: Decision,
-          placed: dict[int, tuple[np.ndarray, str] | None]) -> dict:
+          placed: dict[int, tuple[np.ndarray, str] | None], walked_up: bool) -> dict:
     """The walk from where the agent stopped looking (``decision.stop``) to where it stands beside the committed
     point (``_walk_to``), after the detours to every candidate it walked up to and rejected."""
     t, source = int(decision.stop), int(decision.chosen)  # type: ignore[arg-type]  # a committed decision
     point, landed_on = placed[source]  # type: ignore[misc]  # a committed candidate is placed
-    stand, walked, turns = _walk_to(places, geometry, t, point)
+    walkup = places.walk_up(source, point) if walked_up else None
+    if walkup is not None:  # it walked up to the candidate to check it: it stands where the walk-up ended
+        stand, walked, actions = np.r_[walkup.end, geometry.start.z], walkup.walked, walkup.actions
+    else:
+        stand, walked, turns = _walk_to(places, geometry, t, point)
+        actions = turns + math.ceil(walked / FORWARD_STEP)
     target = np.asarray(geometry.positions[target_id])
     d2g = float(np.linalg.norm(stand - target))
     same = [np.asarray(xyz) for oid, xyz in geometry.positions.items()
@@ -290,7 +211,7 @@ def _stop(places: Placements, geometry: EpisodeGeometry, episode_id: str, target
     near_same = any(np.linalg.norm(stand - xyz) <= SUCCESS_DISTANCE for xyz in same)
     outcome = "success" if d2g <= SUCCESS_DISTANCE else "category error" if near_same else "other stop"
     detour_steps, detour_path = _detours(places, geometry, decision, placed)
-    steps = int(places.steps[t]) + detour_steps + turns + math.ceil(walked / FORWARD_STEP) + 1
+    steps = int(places.steps[t]) + detour_steps + actions + 1
     path = float(places.walked[t]) + detour_path + walked
     geodesic = geometry.geodesic_distance
     spl = float(outcome == "success") * geodesic / max(path, geodesic) if max(path, geodesic) > 0 else 0.0
@@ -329,11 +250,18 @@ def _walk_from(places: Placements, geometry: EpisodeGeometry, t: int, point: np.
 
 def _detours(places: Placements, geometry: EpisodeGeometry, decision: Decision,
              placed: dict[int, tuple[np.ndarray, str] | None]) -> tuple[int, float]:
-    """Steps and metres of the round trips to the candidates the agent walked up to and rejected: to each and back
-    to where it left its walk, turning about (``ABOUT_FACE``) in between."""
+    """Steps and metres of the round trips to the candidates the agent walked up to and rejected: the walk-up's
+    actions and the walk back (``WalkUp.back``) where the episode has a floor map; else the turns toward the
+    candidate, the straight walk there and back and an about-turn (``ABOUT_FACE``)."""
     steps, path = 0, 0.0
     for left_at, candidate in decision.rejected:
-        _, walked, turns = _walk_to(places, geometry, left_at, placed[candidate][0])  # type: ignore[index]
+        goal = placed[candidate][0]  # type: ignore[index]  # a rejected candidate was placed
+        walkup = places.walk_up(candidate, goal)
+        if walkup is not None:
+            steps += walkup.actions + walkup.back
+            path += 2 * walkup.walked
+            continue
+        _, walked, turns = _walk_to(places, geometry, left_at, goal)
         steps += turns + 2 * math.ceil(walked / FORWARD_STEP) + ABOUT_FACE
         path += 2 * walked
     return steps, path
@@ -356,9 +284,9 @@ def standing_point(geometry: EpisodeGeometry, goal: np.ndarray, eye_xy: np.ndarr
 
 def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dict[str, float]:
     """SR, SPL, CE (% of episodes), D2G (metres), Steps, the shares not found and with an unplaced candidate, and of
-    an approach-verify policy the candidates rejected per episode and the % of them that were the target or a
-    look-alike (NaN where none was rejected; these three only for an approach-verify policy's rows), each episode
-    counted ``weights`` times (None: once)."""
+    an approach-verify policy the candidates rejected per episode and the % of them that were the target, a
+    look-alike, another annotated object or nothing annotated (NaN where none was rejected; ``REJECTION_KEYS``, only
+    for an approach-verify policy's rows), each episode counted ``weights`` times (None: once)."""
     w = np.ones(len(episodes)) if weights is None else np.asarray(weights, np.float64)
     total = w.sum()
     if not total:
@@ -380,7 +308,9 @@ def metrics_of(episodes: pd.DataFrame, weights: np.ndarray | None = None) -> dic
                unplaced_pct=100 * mean(episodes["unplaced_candidates"] > 0))
     if episodes["rejected"].notna().any():  # an approach-verify policy's rows
         out |= dict(rejections=float(rejected / total), rejected_target_pct=rejected_share("rejected_target"),
-                    rejected_lookalike_pct=rejected_share("rejected_lookalike"))
+                    rejected_lookalike_pct=rejected_share("rejected_lookalike"),
+                    rejected_other_pct=rejected_share("rejected_other"),
+                    rejected_nothing_pct=rejected_share("rejected_nothing"))
     return out
 
 
@@ -399,11 +329,16 @@ def navigation_sweep(places: Placements, sigmas: np.ndarray, policy: StopPolicy 
 
 
 MAX_SWEEP_SIGMAS = 200  # a navigation curve places each episode's stop anew per sigma: quantiles beyond this many
+WALK_UP_SIGMAS = np.linspace(0.80, 0.995, 8)  # an approach-verify policy renders and scores the walk-ups of each
+# sigma's firings: its curve reads these quantiles of the scores only (its sigma sits high: a firing costs a detour)
 
 
-def sweep_sigmas(scores: np.ndarray) -> np.ndarray:
-    """Candidate sigmas for a navigation curve: every distinct score, or ``MAX_SWEEP_SIGMAS`` quantiles of them."""
+def sweep_sigmas(scores: np.ndarray, policy: StopPolicy = FIRST_MATCH) -> np.ndarray:
+    """Candidate sigmas for a navigation curve: every distinct score, or ``MAX_SWEEP_SIGMAS`` quantiles of them; for
+    an approach-verify policy the ``WALK_UP_SIGMAS`` quantiles."""
     values = np.unique(np.asarray(scores, np.float64))
+    if isinstance(policy, ApproachVerify) and len(values):
+        return np.unique(np.quantile(np.asarray(scores, np.float64), WALK_UP_SIGMAS, method="lower"))
     if len(values) > MAX_SWEEP_SIGMAS:
         values = np.unique(np.quantile(values, np.linspace(0.0, 1.0, MAX_SWEEP_SIGMAS), method="lower"))
     return values

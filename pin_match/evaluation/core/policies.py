@@ -11,6 +11,7 @@ equals today's metrics exactly. Definitions: docs/metrics.md, "Stop policies".
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable
 from dataclasses import replace
 
 import numpy as np
@@ -20,9 +21,12 @@ from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.commits import policy_metrics
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.metrics import COUNT_KEYS, METRIC_KEYS, Scored, as_arrays, threshold_metrics, to_python
+from pin_match.evaluation.core.navigation import sweep_sigmas, walk_decisions
 from pin_match.evaluation.core.stop import (
     FIRST_MATCH,
     ApproachVerify,
+    Decision,
+    PolicyError,
     StopPolicy,
     fired_arrays,
     found_frames,
@@ -39,15 +43,26 @@ from pin_match.evaluation.core.tuning import (
 from pin_match.scoring.table import ScoreTable
 
 MAX_CANDIDATES = 2000  # sigmas tried where one sweep cannot serve: every distinct score, or this many quantiles
-SECOND_LINES = np.linspace(0.05, 0.95, 10)  # quantiles of the approach views' scores tried as an approach's second line
+SECOND_LINE_LEVELS = np.linspace(0.5, 0.98, 5)  # quantiles of the walk's scores (a recording's approach views') tried
+# as an approach's second line
 
 
-def policy_sweep(scored: Scored, policy: StopPolicy) -> pd.DataFrame:
+def policy_sweep(scored: Scored, policy: StopPolicy,
+                 decisions_at: Callable[[float], list[Decision]] | None = None) -> pd.DataFrame:
     """Every count and threshold metric of ``policy_metrics`` at every distinct score as sigma (ascending): the table
     ``tuning.choose_sigma`` reads. A 1-of-1 window is one sorted sweep of the gated scores (``stop.gated_scores``),
     read at every distinct score; a longer window or a look-further policy applies each sigma in turn, at most
-    ``MAX_CANDIDATES`` of them."""
+    ``MAX_CANDIDATES`` of them. An approach-verify policy walks up to its candidates in the house: it needs
+    ``decisions_at(sigma)`` (``navigation.walk_decisions``) and reads the sigmas ``navigation.sweep_sigmas`` gives it,
+    each walk-up rendered and scored once."""
     arr = as_arrays(scored)
+    if isinstance(policy, ApproachVerify):
+        if decisions_at is None:
+            raise PolicyError(f"stop policy {policy} walks up to each candidate: its metrics need the house's walk-ups "
+                              "(a frame-set with geometry and the matcher: pin-match tune / report / trade)")
+        rows = [{"sigma": s, **threshold_metrics(fired_arrays(arr, found_frames(arr, s, policy, decisions_at(s))),
+                                                 0.5)} for s in sweep_sigmas(arr.score, policy)]
+        return pd.DataFrame(rows, columns=["sigma", *COUNT_KEYS, *METRIC_KEYS])
     scores = np.unique(arr.score)
     if policy.one_sweep:
         gated = replace(arr, score=gated_scores(arr, policy))
@@ -73,15 +88,20 @@ def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: 
     """``tuning.tune`` for a stop policy: the sigma that maximises the objective of the policy's metrics (for a
     navigation objective, of the navigation estimate under the policy). An approach-verify policy without a second
     line of its own (``approach:D``) has both tuned: sigma for each second line tried (sigma itself, then
-    ``SECOND_LINES`` of the split's approach-view scores), the best pair kept (the earlier among equals) and its
+    ``SECOND_LINE_LEVELS`` of the split's scores), the best pair kept (the earlier among equals) and its
     ``policy`` written with the line it chose."""
     ctx = EvalContext.of(fs)
     arr = ctx.arrays(table, split)
     navigation = objective in OBJECTIVES and OBJECTIVES[objective].navigation
+    places = ctx.placements(table, split) if ctx.fs.navigation_missing is None else None
+
+    def decisions_at(candidate: StopPolicy) -> Callable[[float], list[Decision]] | None:
+        return None if places is None else lambda s: walk_decisions(places, s, candidate)[0]
+
     best = None
     for candidate in _second_lines(ctx, table, split, policy):
         curve = objective_curve(ctx, table, split, objective, candidate) if navigation else \
-            policy_sweep(arr, candidate)
+            policy_sweep(arr, candidate, decisions_at(candidate))
         index, value = choose_sigma(curve, objective, match_floor)
         if best is None or value > best[2]:
             best = (candidate, float(curve["sigma"].iloc[index]), value, len(curve))
@@ -90,16 +110,18 @@ def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: 
                 sigma=sigma, policy=str(policy), objective=objective, objective_value=value, split=split,
                 frameset_fingerprint=table.meta.get("frameset_fingerprint"), n_frames=len(arr.score),
                 n_candidates=n_candidates,
-                metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(arr, sigma, policy).items()},
+                metrics_at_sigma={k: to_python(v) for k, v in policy_metrics(
+                    arr, sigma, policy, None if places is None else walk_decisions(places, sigma, policy)[0]).items()},
                 date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
 
 
 def _second_lines(ctx: EvalContext, table: ScoreTable, split: str, policy: StopPolicy) -> list[StopPolicy]:
     """The policies ``tune_policy`` tries: ``policy`` itself, and for an approach without a second line each of
-    ``SECOND_LINES`` (quantiles of the split's approach-view scores, of its walk's where it has none)."""
+    ``SECOND_LINE_LEVELS`` (quantiles of the split's recorded approach views' scores, of its walk's where it has none:
+    a synthetic set's walk-ups are rendered only as a policy walks up)."""
     if not isinstance(policy, ApproachVerify) or policy.sigma2 is not None:
         return [policy]
     views = ctx.approach_scored(table, split)["score"].to_numpy(np.float64)
     scores = views if len(views) else ctx.arrays(table, split).score
-    lines = np.unique(np.quantile(scores, SECOND_LINES))
+    lines = np.unique(np.quantile(scores, SECOND_LINE_LEVELS))
     return [policy, *(replace(policy, sigma2=float(line)) for line in lines)]

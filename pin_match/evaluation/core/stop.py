@@ -52,13 +52,14 @@ Placeable = Callable[[int], bool]  # can the candidate of this frame (an index i
 @dataclass(frozen=True)
 class CloseLook:
     """A candidate as an agent that walks up to it meets it: what it remembers of it if it rejects it (``key``: the
-    object, or the goal's floor cell, known from where the goal was placed), so a later firing on the same thing is not
-    proposed again, and each view on its way as (distance in metres from the candidate, score). No views: nothing was
-    seen from close by (a candidate on nothing the frame-set has approach views of), so the candidate's own frame
-    stands for them; None: the agent has not reached it yet (live)."""
+    cell of its own map the goal point falls in; ``around``: the cells it marks as checked, the key's alone when
+    empty), so a later firing on the same thing is not proposed again, and each view on its way as (distance in
+    metres from the goal point, score). No views: nothing was seen from close by, so the candidate's own frame stands
+    for them; None: the agent has not reached it yet (live, or offline before its walk-up is rendered)."""
 
     key: Hashable
     views: tuple[tuple[float, float], ...] | None = ()
+    around: frozenset = frozenset()
 
 
 Verify = Callable[[int], CloseLook]  # frame i's candidate as the agent meets it when it walks up to it
@@ -152,8 +153,10 @@ class StopPolicy:
         """Is the policy at every sigma one sorted sweep of its gated scores (``gated_scores``)? A 1-of-1 window is."""
         return self.n == 1
 
-    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
-        """Per frame: is it one PIN's metrics count as matched under the policy? Every frame where it fires."""
+    def found(self, arr: FrameArrays, sigma: float, decisions: list[Decision] | None = None) -> np.ndarray:
+        """Per frame: is it one PIN's metrics count as matched under the policy? Every frame where it fires.
+        ``decisions``: the policy's, where the caller made them with what the house says (a policy that commits
+        reads them; None: ``decide`` with every candidate placeable)."""
         return self.fires(arr, sigma)
 
     def decide(self, arr: FrameArrays, sigma: float, placeable: Placeable | None = None,
@@ -271,10 +274,10 @@ class LookFurther(StopPolicy):
     def one_sweep(self) -> bool:
         return False
 
-    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
+    def found(self, arr: FrameArrays, sigma: float, decisions: list[Decision] | None = None) -> np.ndarray:
         """The frame it commits to and, as PIN's rule counts every frame where it fires, every firing after the frame
         where it committed (the candidates it passed over are not found): ``window=0`` is the base rule exactly."""
-        return committed_found(self, arr, sigma)
+        return committed_found(self, arr, sigma, decisions)
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
                 placeable: Placeable | None, sigma: float = math.nan, verify: Verify | None = None) -> Decision:
@@ -302,10 +305,11 @@ class ApproachVerify(StopPolicy):
     """Walk up and check before stopping (IEVE's verify, UniGoal's blacklist): at a firing (a placeable candidate)
     the agent leaves its walk for the candidate, looks at it again from within ``distance`` metres on its way, and
     commits there if the best of those views reaches the second line, ``sigma2`` (None: sigma itself). Otherwise it
-    rejects the candidate, remembers it (``CloseLook.key``: a later firing on the same thing is passed over), walks
-    back and resumes its walk at the next frame. Where no view came within ``distance``, the nearest one stands for
-    them (the agent got no closer); where there is no view at all (``verify`` None, or a candidate on nothing the
-    frame-set has approach views of) the candidate's own frame does. Every step of the detours counts
+    rejects the candidate, remembers the cells of its map around the goal (``CloseLook``: a later firing there is
+    passed over), walks back and resumes its walk at the next frame. Where no view came within ``distance``, the
+    nearest ones stand for them (the agent got no closer); where there is no view at all (``verify`` None: a reader
+    without the house, such as PIN's metrics on real photos) the candidate's own frame does. A synthetic set's
+    walk-ups are rendered on demand (``navigation.walk_decisions``). Every step of the detours counts
     (``navigation``). Nothing of the walk after the frame where it commits is read, nor any view of a candidate it
     did not walk up to."""
 
@@ -344,16 +348,17 @@ class ApproachVerify(StopPolicy):
         return sigma if self.sigma2 is None else self.sigma2
 
     def close_score(self, look: CloseLook, own: float) -> float:
-        """The score the agent verifies a candidate on: the best view within ``distance``, else the nearest view,
-        else the candidate's own frame (``own``)."""
+        """The score the agent verifies a candidate on: the best view within ``distance``, else the best of the nearest
+        views (it got no closer), else the candidate's own frame (``own``)."""
         if not look.views:  # None (not reached) never gets here: ``_decide`` waits for the views
             return own
         near = [score for d, score in look.views if d <= self.distance]
-        return max(near) if near else min(look.views)[1]
+        closest = min(d for d, _ in look.views)
+        return max(near) if near else max(score for d, score in look.views if d <= closest)
 
-    def found(self, arr: FrameArrays, sigma: float) -> np.ndarray:
+    def found(self, arr: FrameArrays, sigma: float, decisions: list[Decision] | None = None) -> np.ndarray:
         """The frame whose candidate it commits to and every firing after the commit (as ``LookFurther.found``)."""
-        return committed_found(self, arr, sigma)
+        return committed_found(self, arr, sigma, decisions)
 
     def _decide(self, scores: np.ndarray, fired: np.ndarray, source: np.ndarray, bounds: tuple[int, int],
                 placeable: Placeable | None, sigma: float = math.nan, verify: Verify | None = None) -> Decision:
@@ -381,16 +386,17 @@ class ApproachVerify(StopPolicy):
             if self.close_score(look, float(scores[candidate])) >= self.second_line(sigma):
                 return Decision(first, int(t), candidate, tuple(candidates), passed, tuple(rejected))
             rejected.append((int(t), candidate))
-            remembered.add(look.key)
+            remembered |= look.around or {look.key}
         return Decision(first, None, None, tuple(candidates), passed, tuple(rejected))
 
 
-def committed_found(policy: StopPolicy, arr: FrameArrays, sigma: float) -> np.ndarray:
+def committed_found(policy: StopPolicy, arr: FrameArrays, sigma: float,
+                    decisions: list[Decision] | None = None) -> np.ndarray:
     """The frame a policy commits to and, as PIN's rule counts every frame where it fires, every firing after the frame
-    where it committed (the candidates it passed over or rejected are not found)."""
+    where it committed (the candidates it passed over or rejected are not found); ``decisions`` as for ``found``."""
     fires = policy.fires(arr, sigma)
     mask = np.zeros(len(arr.score), bool)
-    for (_, end), d in zip(episode_bounds(arr), policy.decide(arr, sigma)):
+    for (_, end), d in zip(episode_bounds(arr), decisions or policy.decide(arr, sigma)):
         if d.chosen is not None:
             mask[d.chosen] = True
             mask[d.stop + 1:end] = fires[d.stop + 1:end]  # type: ignore[operator]  # a commit has a stop
@@ -529,9 +535,11 @@ class RunningLevel:
         return total / len(self._best)
 
 
-def found_frames(arr: FrameArrays, sigma: float, policy: StopPolicy) -> np.ndarray:
-    """Per frame (in ``arr``'s order): is it found under the policy (``StopPolicy.found``)? What PIN's metrics read."""
-    return policy.found(arr, sigma)
+def found_frames(arr: FrameArrays, sigma: float, policy: StopPolicy,
+                 decisions: list[Decision] | None = None) -> np.ndarray:
+    """Per frame (in ``arr``'s order): is it found under the policy (``StopPolicy.found``)? What PIN's metrics read;
+    ``decisions``: the policy's, made once by the caller with what the house says (``navigation.walk_decisions``)."""
+    return policy.found(arr, sigma, decisions)
 
 
 def fired_arrays(arr: FrameArrays, found: np.ndarray) -> FrameArrays:

@@ -119,7 +119,7 @@ def objective_curve(ctx: EvalContext, table: ScoreTable, split: str, objective: 
         if reason is not None:
             raise TuningError(f"objective {objective!r} needs the navigation estimate: {reason}")
         places = ctx.placements(table, split)
-        return navigation_sweep(places, sweep_sigmas(places.arrays.score), policy)
+        return navigation_sweep(places, sweep_sigmas(places.arrays.score, policy), policy)
     return sweep(ctx.arrays(table, split))
 
 

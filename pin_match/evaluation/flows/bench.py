@@ -18,7 +18,7 @@ from pathlib import Path
 import pandas as pd
 
 from pin_match import atomic
-from pin_match.contract.registry import get_matcher_class
+from pin_match.contract.registry import create_matcher, get_matcher_class
 from pin_match.data.frameset import FrameSet
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.analysis import BenchRun
@@ -33,6 +33,7 @@ from pin_match.evaluation.flows.report import report
 from pin_match.scoring.api import score_many
 from pin_match.scoring.options import DEFAULT_RUN, RunOptions
 from pin_match.scoring.table import ScoreTable
+from pin_match.scoring.walkups import walkup_scorer
 
 REPORT_SPLIT = "val"
 
@@ -126,8 +127,12 @@ def bench(data: FrameSet | str | Path | EvalContext, matchers: Sequence[str] | M
     watch = watch or Stopwatch()
     scored_split = None if tuning else REPORT_SPLIT  # no tuning: val is all it needs
     n_frames = len(ctx.fs.split(scored_split).frames)
+    built = {name: create_matcher(name, **(cfg or {})) for name, cfg in configs.items()}
     with watch.step(f"score {' + '.join(configs)}", f"{n_frames} frames, one pass"):
-        tables = dict(zip(configs, score_many(ctx.fs, configs, split=scored_split, out=layout.scores, run=run)))
+        tables = dict(zip(configs, score_many(ctx.fs, list(built.values()), split=scored_split, out=layout.scores,
+                                              run=run)))
+    if ctx.walk_ups is None:  # an approach-verify policy walks up to candidates: rendered and scored on demand
+        ctx.walk_ups = walkup_scorer(ctx.fs, built.values(), layout.scores, run)
     results, tuned = [], {}
     with watch.step("tune + report"):
         for name in tqdm(configs, desc="tune + report", unit="matcher", disable=not run.progress,

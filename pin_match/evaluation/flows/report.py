@@ -79,7 +79,7 @@ def report(table: ScoreTable, data: FrameSet | EvalContext, out_dir: str | Path,
         atomic.write_text(files.views, views.assign(sigma=choice.value, sigma_source=choice.source).to_csv())
     if evaluation.walks is not None:
         atomic.write_text(files.navigation, evaluation.walks.to_csv(index=False))
-        curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score), policy)
+        curve = navigation_sweep(ctx.placements(table, split), sweep_sigmas(evaluation.arrays.score, policy), policy)
         plot_navigation_curves(curve, choice.value, files.navigation_curves, title)
     write_report_page(files, table, ctx.fs, evaluation)
     # last: a folder without metrics.json is a report that stopped (e.g. on a damaged mask the page reads)

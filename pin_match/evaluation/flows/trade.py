@@ -21,7 +21,7 @@ from pin_match import atomic
 from pin_match.data.frameset import FrameSet
 from pin_match.evaluation.core.commits import commit_metrics, commitments
 from pin_match.evaluation.core.evaluator import EvalContext
-from pin_match.evaluation.core.navigation import episodes_at, navigation_metrics, walk_decisions
+from pin_match.evaluation.core.navigation import REJECTION_KEYS, episodes_at, navigation_metrics, walk_decisions
 from pin_match.evaluation.core.policies import tune_policy
 from pin_match.evaluation.core.stop import LookFurther, StopPolicy
 from pin_match.evaluation.core.tuning import DEFAULT_OBJECTIVE
@@ -30,7 +30,7 @@ from pin_match.scoring.table import ScoreTable
 
 DEFAULT_WINDOWS = ("look:0", "look:10", "look:20", "look:40", "look:rest")
 TRADE_KEYS = ("sr", "ce", "spl", "d2g", "steps", "not_found_pct", "commit_target_pct", "commit_lookalike_pct",
-              "still_looking_pct", "frames_looked_at", "rejections", "rejected_target_pct", "rejected_lookalike_pct")
+              "still_looking_pct", "frames_looked_at", *REJECTION_KEYS)
 
 
 def default_objective(fs: FrameSet) -> str:

@@ -151,7 +151,8 @@ def navigation_html(fs: FrameSet, table: ScoreTable, evaluation: Evaluation, sig
 NAVIGATION_NAMES = (("sr", "SR %"), ("spl", "SPL %"), ("ce", "CE %"), ("d2g", "D2G m"), ("steps", "Steps"),
                     ("not_found_pct", "not found %"), ("unplaced_pct", "a candidate without depth %"),
                     ("rejections", "rejected per episode"), ("rejected_target_pct", "of them the target %"),
-                    ("rejected_lookalike_pct", "of them a look-alike %"))
+                    ("rejected_lookalike_pct", "of them a look-alike %"), ("rejected_other_pct", "another object %"),
+                    ("rejected_nothing_pct", "nothing annotated %"))
 
 
 def _value(v: float | None) -> str:
@@ -179,7 +180,7 @@ def write_report_page(files: ReportFiles, table: ScoreTable, fs: FrameSet, evalu
     parts += sizes_section(files.sizes)
     parts += views_section(files.views)
     parts += navigation_html(fs, table, evaluation, sigma, assets)
-    parts += stop_html(evaluation.arrays, sigma, evaluation.policy)
+    parts += stop_html(evaluation.arrays, sigma, evaluation.policy, evaluation.decisions)
     cohorts = target_cohorts(table)
     parts += scale_html(fs, cohorts, evaluation, sigma, assets)
     for section in sections(evaluation.frames, sigma, cap):

@@ -17,15 +17,16 @@ from markupsafe import Markup
 
 from pin_match.evaluation.core.commits import episode_stops
 from pin_match.evaluation.core.metrics import FrameArrays
-from pin_match.evaluation.core.stop import DEFAULT_POLICY, HouseStop, LookFurther, StopPolicy, describe
+from pin_match.evaluation.core.stop import DEFAULT_POLICY, Decision, HouseStop, LookFurther, StopPolicy, describe
 from pin_match.evaluation.pages import html
 
 
-def stop_html(arrays: FrameArrays, sigma: float, policy: StopPolicy = DEFAULT_POLICY) -> list[Markup]:
+def stop_html(arrays: FrameArrays, sigma: float, policy: StopPolicy = DEFAULT_POLICY,
+              decisions: list[Decision] | None = None) -> list[Markup]:
     """A heading, what the policy does, and one row per episode: PIN's first match at sigma, the policy's stop with
     the house's level and line there and why it fired (or never did), and the target's best frame with its offset
     above the house."""
-    stops = episode_stops(arrays, sigma, policy)
+    stops = episode_stops(arrays, sigma, policy, decisions)
     return [html.heading("Where the stop rule put the line", 2, "stop"),
             html.paragraph(_rule(policy, sigma), "note"),
             html.table(stop_table(stops, sigma, policy))]
