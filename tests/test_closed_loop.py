@@ -225,6 +225,9 @@ def test_a_set_with_nothing_to_walk_up_to_says_so(loop_set):
     with pytest.raises(NavigationError, match="has no walk-ups: a synthetic set renders them"):
         episodes_at(places, 0.5, POLICY)
     assert episodes_at(places, 0.5, StopPolicy()).iloc[0].stop_step == 0  # other policies need none
+    from pin_match.scoring.walkups import walkup_scorer
+
+    assert walkup_scorer(loop_set, []) is None  # not the generator's: no house to render a walk-up in
 
 
 # ------------------------------------------------------------------ rendered in the house, scored by a matcher

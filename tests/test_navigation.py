@@ -349,9 +349,9 @@ def test_a_writer_with_a_camera_needs_every_episodes_geometry(tmp_path):
 
 def test_a_rendered_pixel_lands_inside_its_object(tmp_path):
     """The renderer's own depth and pose: every pixel of a box, back-projected, lies inside the box."""
+    from pin_match.data.agent import CAMERA_HEIGHT
     from pin_match.data.synth.render import Camera, Light, Renderer, vertical_fov
     from pin_match.data.synth.shapes import box
-    from pin_match.data.synth.walk import CAMERA_HEIGHT
 
     hfov, yaw, pitch = 42.0, 0.3, -0.2  # the box ahead, left of the axis and below it
     ahead = (math.cos(yaw) * math.cos(pitch), math.sin(yaw) * math.cos(pitch), math.sin(pitch))

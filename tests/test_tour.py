@@ -9,9 +9,10 @@ import itertools
 import numpy as np
 import pytest
 
+from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, TURN
 from pin_match.data.synth import tour
 from pin_match.data.synth.scene import Room, Surface, make_house, place_objects
-from pin_match.data.synth.walk import CAMERA_HEIGHT, HALF_HFOV, HALF_VFOV, STEP, TURN, Grid, _main_floor
+from pin_match.data.synth.walk import HALF_HFOV, HALF_VFOV, Grid, _main_floor
 
 ROOMS = 3
 LIMIT = 1000  # PIN's episode limit: the budget the generator passes
@@ -77,7 +78,7 @@ def test_one_pin_action_a_pose(seed):
         tilted = abs(bp - ap)
         changes = (moved > 1e-9) + (turned > 1e-9) + (tilted > 1e-9)
         assert changes == 1, (ax, ay, ayaw, ap, bx, by, byaw, bp)
-        assert moved <= STEP + 1e-9 and turned <= TURN + 1e-9 and tilted in (0.0, pytest.approx(np.radians(30)))
+        assert moved <= FORWARD_STEP + 1e-9 and turned <= TURN + 1e-9 and tilted in (0.0, pytest.approx(np.radians(30)))
         assert moved < 1e-9 or bp == 0.0
     assert {round(float(np.degrees(p))) for *_, p in walk} <= {0, -30, -60}
 

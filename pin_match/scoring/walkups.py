@@ -10,6 +10,7 @@ target, and every decision already made reads the same numbers again: score once
 from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import replace
 from pathlib import Path
 
 from pin_match import outputs
@@ -31,7 +32,8 @@ class RenderedWalkUps:
     def __init__(self, fs: FrameSet, matcher: Matcher, out: str | Path = outputs.SCORES,
                  run: RunOptions = DEFAULT_RUN) -> None:
         self.root = Path(out) / WALKUPS / fs.fingerprint
-        self.fs, self.matcher, self.out, self.run = fs, matcher, out, run
+        self.fs, self.matcher, self.out = fs, matcher, out
+        self.run = replace(run, progress=False)  # a round of walk-ups is a moment of a decision: no bar of its own
         self._houses = None
         self.scores: dict[tuple[str, str], float] = {}
         self.pending: dict[str, dict[str, Pose]] = {}

@@ -32,13 +32,12 @@ from itertools import combinations
 
 import numpy as np
 
+from pin_match.data.agent import CAMERA_HEIGHT, TILT, TURN
 from pin_match.data.synth.scene import Room, Surface
 from pin_match.data.synth.walk import (
-    CAMERA_HEIGHT,
     CELL,
     HALF_HFOV,
     HALF_VFOV,
-    TURN,
     Grid,
     Pose,
     _start,
@@ -46,7 +45,7 @@ from pin_match.data.synth.walk import (
     _wrap,
 )
 
-VIEW_DISTANCE = 0.8  # metres from a piece's nearest surface point to where the tour prefers to stand: near enough
+VIEW_DISTANCE = 0.6  # metres from a piece's nearest surface point to where the tour prefers to stand: near enough
 # that a product on it shows large, far enough that the piece fits a few headings
 VIEW_FAR = 1.2  # the farthest a standing spot may be from the piece it looks at
 NEAR = 0.5  # the nearest: closer, only a steep look down would show what stands there
@@ -58,7 +57,6 @@ FLOOR_NEAR = 0.75  # large), unless nearer than this (a look 30 degrees down sho
 FLOOR_SHARE = 0.3  # ... and a floor's next spot must see this share of it: one look over a room's floor sees most
 POINT_SPACING = 0.25  # metres between the points a piece's surfaces are covered by
 LOOK_ABOVE = 0.1  # an object's middle stands about this far above its surface: where the tour aims
-TILT = np.radians(30)  # PIN's look-down / look-up action
 TILTS = sorted((combo for n in range(1, 5) for combo in combinations((TILT, 0.0, -TILT, -2 * TILT), n)),
                key=lambda combo: (len(combo), sum(map(abs, combo))))  # a heading's tilts: fewest, gentlest first
 EDGE = np.radians(5)  # a point aimed at stays this far inside the frame's top and bottom edges ...
@@ -133,7 +131,8 @@ def _pieces(room: Room) -> list[_Piece]:
         blocked = np.zeros(len(band), bool)
         for bx0, by0, bx1, by1 in [*room.footprints, *room.keep_clear]:
             blocked |= (band[:, 0] > bx0) & (band[:, 0] < bx1) & (band[:, 1] > by0) & (band[:, 1] < by1)
-        pieces.append(_Piece(band[~blocked], None, "floor"))
+        if not blocked.all():
+            pieces.append(_Piece(band[~blocked], None, "floor"))
     return pieces
 
 
@@ -167,7 +166,7 @@ def _viewpoints(room: Room, grid: Grid, reachable: set[tuple[int, int]]) -> list
         floor = piece.kind == "floor"
         near, cover, share = (FLOOR_NEAR, FLOOR_COVER, FLOOR_SHARE) if floor else (NEAR, COVER, MIN_SHARE)
         gap = far.min(1)
-        ok = (gap <= VIEW_FAR) & ((gap >= NEAR) | floor)
+        ok = floor | ((gap >= NEAR) & (gap <= VIEW_FAR))
         cost = np.abs(gap - VIEW_DISTANCE)
         if piece.facing is not None:
             front = np.array([np.cos(piece.facing), np.sin(piece.facing)])
@@ -266,9 +265,8 @@ def _shortest(cost: np.ndarray, first: np.ndarray, last: np.ndarray) -> list[int
 
 
 def _look(walk: _Walk, view: _View) -> None:
-    """Walk to a view and look as it says, one PIN action a pose: level while walking, then per heading (the nearest
-    end of the sweep first) a turn and the tilts, one 30 degree step a pose, then level again."""
-    _tilt(walk, 0.0)
+    """Walk to a view (level, as every view leaves the camera) and look as it says, one PIN action a pose: per heading
+    (the nearest end of the sweep first) a turn and the tilts, one 30 degree step a pose, then level again."""
     walk.go_to(view.cell)
     looks = view.looks
     if abs(_wrap(looks[-1][0] - walk.yaw)) < abs(_wrap(looks[0][0] - walk.yaw)):

@@ -32,12 +32,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, TURN
 from pin_match.data.geometry import AGENT_RADIUS, FloorMap
 from pin_match.data.synth.scene import Room
 
-CAMERA_HEIGHT = 1.31
-STEP = 0.25
-TURN = np.radians(30)
 CELL = 0.1
 MAP_CELL = 0.05  # the stored floor map's cell: finer than the walk's, since a stop beside furniture is measured on it
 START_AWAY = 2.0  # metres of walk at least from the start to the target: PIN's 1 m success distance and as much again
@@ -314,7 +312,8 @@ class _Walk:
                 if abs(_wrap(heading - self.yaw)) > np.radians(20):
                     self.turn_to(heading)
                     continue
-                self.pos = self.pos + (waypoint - self.pos) * min(1.0, STEP / np.linalg.norm(waypoint - self.pos))
+                ahead = float(np.linalg.norm(waypoint - self.pos))
+                self.pos = self.pos + (waypoint - self.pos) * min(1.0, FORWARD_STEP / ahead)
                 self.emit()
 
     def explore(self, budget: int) -> None:
@@ -342,7 +341,7 @@ class _Walk:
             left = float(np.linalg.norm(final - self.pos))
             if left < 0.05:
                 break
-            self.pos = self.pos + (final - self.pos) * min(1.0, STEP / left)
+            self.pos = self.pos + (final - self.pos) * min(1.0, FORWARD_STEP / left)
         if stop:  # the agent looks at what it found, tilting in two steps, then stops
             centre = _pitch_for(self.pos, look, centre=True)
             for pitch in ((self.pitch + centre) / 2, centre):

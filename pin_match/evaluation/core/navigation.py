@@ -122,7 +122,7 @@ def _verifier(places: Placements, policy: StopPolicy,
     """An approach-verify policy's close looks (None for any other policy); a set with nothing to walk up to says so."""
     if not isinstance(policy, ApproachVerify):
         return None
-    if places.walkups is None and not places.views:
+    if places.walkups is None and not places.recorded_views:
         raise NavigationError(f"stop policy {policy} walks up to each candidate, but {places.fs.root} has no "
                               "walk-ups: a synthetic set renders them when its matcher is given (pin-match tune / "
                               "report / bench / trade do), a PIN recording has the approach views it recorded, "
@@ -329,7 +329,7 @@ def navigation_sweep(places: Placements, sigmas: np.ndarray, policy: StopPolicy 
 
 
 MAX_SWEEP_SIGMAS = 200  # a navigation curve places each episode's stop anew per sigma: quantiles beyond this many
-WALK_UP_SIGMAS = np.linspace(0.80, 0.995, 8)  # an approach-verify policy renders and scores the walk-ups of each
+WALK_UP_SIGMAS = np.linspace(0.85, 0.995, 5)  # an approach-verify policy renders and scores the walk-ups of each
 # sigma's firings: its curve reads these quantiles of the scores only (its sigma sits high: a firing costs a detour)
 
 

@@ -71,9 +71,9 @@ class Placements:
         # read per stop at every sigma of a sweep: looked up in dicts, not in the tables
         self.category = dict(zip(fs.objects.object_id, fs.objects.category.astype(str)))
         self.target = dict(zip(fs.episodes.episode_id, fs.episodes.target_object_id.astype(str)))
-        self.views = _approach_views(fs, approach)
+        self.recorded_views = _approach_views(fs, approach)  # a recording's approach views
         self.walkups = walkups
-        self._walk_ups: dict[tuple[int, bytes], WalkUp] = {}
+        self._walk_up_of: dict[tuple[int, bytes], WalkUp] = {}
         self.walks: dict[tuple[int, bytes], tuple[np.ndarray, float, int]] = {}  # ``_walk_to``'s, by frame and point
 
     def close_look(self, frame: int, placed: tuple[np.ndarray, str], within: float) -> CloseLook:
@@ -90,12 +90,12 @@ class Placements:
             views = () if walkup is None else self.walkups.views(episode_id, walkup, within)
             return CloseLook(key, views, around)
         positions = self.geometry.episodes[episode_id].positions
-        if positions and self.views:
+        if positions and self.recorded_views:
             ids = list(positions)
             gaps = np.linalg.norm(np.asarray([positions[i] for i in ids], np.float64) - goal, axis=1)
             nearest = int(np.argmin(gaps))
             if gaps[nearest] <= RECORDED_ON:
-                return CloseLook(key, self.views.get((episode_id, ids[nearest]), ()), around)
+                return CloseLook(key, self.recorded_views.get((episode_id, ids[nearest]), ()), around)
         return CloseLook(key, (), around)
 
     def walk_up(self, frame: int, goal: np.ndarray) -> WalkUp | None:
@@ -105,9 +105,9 @@ class Placements:
         if floor is None:
             return None
         key = (frame, np.asarray(goal, np.float64).tobytes())
-        if key not in self._walk_ups:
-            self._walk_ups[key] = walk_up(floor, *self.xy[frame], float(self.yaw[frame]), goal)
-        return self._walk_ups[key]
+        if key not in self._walk_up_of:
+            self._walk_up_of[key] = walk_up(floor, *self.xy[frame], float(self.yaw[frame]), goal)
+        return self._walk_up_of[key]
 
     def points(self, frame_id: str) -> FramePoints:
         if frame_id not in self._points:

@@ -43,7 +43,7 @@ from pin_match.evaluation.core.tuning import (
 from pin_match.scoring.table import ScoreTable
 
 MAX_CANDIDATES = 2000  # sigmas tried where one sweep cannot serve: every distinct score, or this many quantiles
-SECOND_LINE_LEVELS = np.linspace(0.5, 0.98, 5)  # quantiles of the walk's scores (a recording's approach views') tried
+SECOND_LINE_LEVELS = np.linspace(0.5, 0.95, 4)  # quantiles of the walk's scores (a recording's approach views') tried
 # as an approach's second line
 
 
