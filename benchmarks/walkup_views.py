@@ -40,7 +40,7 @@ def view_rows(walkups: FrameSet, split: str) -> pd.DataFrame:
 
 def walkup_table(fs: FrameSet, scores: Path, split: str) -> pd.DataFrame:
     rows = []
-    for folder in sorted((scores / WALKUPS / fs.fingerprint / "sets").glob("*")):
+    for folder in sorted((scores / WALKUPS / fs.fingerprint / "sets").glob("[!.]*")):
         walkups = FrameSet.load(folder)
         views = view_rows(walkups, split)
         for table in scores.glob(f"*/{walkups.fingerprint}/scores_*.parquet"):
