@@ -5,7 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pin_match.evaluation.core.stop import ApproachVerify, CloseLook, Decision, PolicyError, StopPolicy, one_walk
+from pin_match.evaluation.core.stop import (
+    ApproachVerify,
+    CloseLook,
+    Decision,
+    PolicyError,
+    StopPolicy,
+    latest_counted,
+    one_walk,
+)
 
 WALK = np.array([0.1, 0.7, 0.8, 0.2, 0.9, 0.3])  # firings at 0.5: steps 1, 2 (the look-alike) and 4 (the target)
 LOOKS = {1: CloseLook("lookalike", ((2.0, 0.9), (0.8, 0.3))),  # seen well from 2 m, poorly from 0.8 m
@@ -84,6 +92,23 @@ def test_nothing_after_the_commit_nor_of_a_candidate_not_walked_up_to_is_read():
             return LOOKS[frame]
 
         assert policy.decide(one_walk(later), 0.5, verify=verify)[0] == base
+
+
+@pytest.mark.parametrize("k, n", [(1, 1), (2, 3), (3, 5)])
+def test_a_window_first_fires_on_its_candidate_s_own_frame(k, n):
+    """The walk-up departs from the candidate frame's pose because the agent leaves its walk there: under any window
+    the first firing whose candidate is frame c is frame c itself (``ApproachVerify``)."""
+    rng = np.random.default_rng(k * 10 + n)
+    policy = ApproachVerify(k, n, distance=1.0)
+    for _ in range(200):
+        arr = one_walk(rng.uniform(0, 1, 30))
+        counted = arr.score >= 0.6
+        fired = policy._window_fires(arr, counted)
+        source = latest_counted(arr, counted)
+        first_firing: dict[int, int] = {}
+        for t in np.flatnonzero(fired):
+            first_firing.setdefault(int(source[t]), int(t))
+        assert all(candidate == t for candidate, t in first_firing.items())
 
 
 def test_a_live_approach_arrives_only_when_asked():

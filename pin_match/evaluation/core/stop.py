@@ -302,16 +302,17 @@ class LookFurther(StopPolicy):
 
 @dataclass(frozen=True)
 class ApproachVerify(StopPolicy):
-    """Walk up and check before stopping (IEVE's verify, UniGoal's blacklist): at a firing (a placeable candidate)
-    the agent leaves its walk for the candidate, looks at it again from within ``distance`` metres on its way, and
-    commits there if the best of those views reaches the second line, ``sigma2`` (None: sigma itself). Otherwise it
-    rejects the candidate, remembers the cells of its map around the goal (``CloseLook``: a later firing there is
-    passed over), walks back and resumes its walk at the next frame. Where no view came within ``distance``, the
-    nearest ones stand for them (the agent got no closer); where there is no view at all (``verify`` None: a reader
-    without the house, such as PIN's metrics on real photos) the candidate's own frame does. A synthetic set's
-    walk-ups are rendered on demand (``navigation.walk_decisions``). Every step of the detours counts
-    (``navigation``). Nothing of the walk after the frame where it commits is read, nor any view of a candidate it
-    did not walk up to."""
+    """Walk up and check before stopping (IEVE's verify, UniGoal's blacklist): at a firing (a placeable candidate) the
+    agent leaves its walk for the candidate, looks at it again from within ``distance`` metres on its way, and commits
+    there if the best of those views reaches the second line, ``sigma2`` (None: sigma itself). Otherwise it rejects the
+    candidate, remembers the cells of its map around the goal (``CloseLook``: a later firing there is passed over),
+    walks back and resumes its walk at the next frame. It leaves its walk where the policy first fires on a candidate,
+    which is the candidate's own frame under any window (a later window with no new counted frame counts a subset of its
+    frames), so a walk-up departs from the candidate frame's pose. Where no view came within ``distance``, the nearest
+    ones stand for them (the agent got no closer); where there is no view at all (``verify`` None: a reader without the
+    house, such as PIN's metrics on real photos) the candidate's own frame does. A synthetic set's walk-ups are rendered
+    on demand (``navigation.walk_decisions``). Every step of the detours counts (``navigation``). Nothing of the walk
+    after the frame where it commits is read, nor any view of a candidate it did not walk up to."""
 
     distance: float = field(default=1.0, kw_only=True)
     sigma2: float | None = field(default=None, kw_only=True)
