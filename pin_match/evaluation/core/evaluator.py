@@ -35,7 +35,7 @@ from pin_match.evaluation.core.metrics import (
 from pin_match.evaluation.core.navigation import episodes_at, navigation_metrics, walk_decisions
 from pin_match.evaluation.core.placements import Placements, WalkUpViews
 from pin_match.evaluation.core.sigma import SigmaChoice, way_out
-from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy, describe
+from pin_match.evaluation.core.stop import FIRST_MATCH, Decision, StopPolicy
 from pin_match.scoring.table import ScoreTable
 
 
@@ -160,7 +160,7 @@ def evaluate(table: ScoreTable, data: FrameSet | EvalContext, sigma: SigmaChoice
         estimate = navigation_metrics(walks, ctx.clusters, ctx.boot)
         metrics.update(estimate.pop("metrics"))
         ci95.update(estimate.pop("ci95"))
-        navigation = {"policy": describe(policy), **estimate}
+        navigation = {"policy": policy.describe(), **estimate}
     commits = None
     decisions = None if walks is None else walk_decisions(ctx.placements(table, split), sigma.value, policy)[0]
     if policy != FIRST_MATCH:

@@ -17,7 +17,7 @@ from markupsafe import Markup
 
 from pin_match.evaluation.core.commits import episode_stops
 from pin_match.evaluation.core.metrics import FrameArrays
-from pin_match.evaluation.core.stop import DEFAULT_POLICY, Decision, HouseStop, LookFurther, StopPolicy, describe
+from pin_match.evaluation.core.stop import DEFAULT_POLICY, Decision, HouseStop, LookFurther, StopPolicy
 from pin_match.evaluation.pages import html
 
 
@@ -55,7 +55,7 @@ def stop_table(stops: pd.DataFrame, sigma: float, policy: StopPolicy) -> pd.Data
 
 def _rule(policy: StopPolicy, sigma: float) -> str:
     if isinstance(policy, LookFurther):
-        return (f"Policy {describe(policy)}. Sigma {sigma:g}. 'stop' is the firing that opened the window; the "
+        return (f"Policy {policy.describe()}. Sigma {sigma:g}. 'stop' is the firing that opened the window; the "
                 "candidates are the firing frames it weighed until it committed, and the agent walks back to the one "
                 "it committed to (its steps and path are counted).")
     window = "" if (policy.k, policy.n) == (1, 1) else f"; it stops when {policy.k} of the last {policy.n} frames do"
