@@ -7,9 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from pin_match.data.agent import FRAME_HEIGHT, FRAME_WIDTH
 from pin_match.data.compose import (
-    FRAME_HEIGHT,
-    FRAME_WIDTH,
     cutout,
     largest_piece,
     letterbox,
@@ -19,20 +18,24 @@ from pin_match.data.compose import (
     stable_seed,
 )
 
-DATA = Path(__file__).resolve().parents[1] / "pin_match" / "data"
-SHARED = {"FRAME_HEIGHT", "FRAME_WIDTH", "stable_seed", "cutout", "paste", "room_crop", "letterbox",
-          "scale_brightness", "largest_piece"}
+PACKAGE = Path(__file__).resolve().parents[1] / "pin_match"
+HOME = {name: "data/compose.py" for name in ("stable_seed", "cutout", "paste", "room_crop", "letterbox",
+                                            "scale_brightness", "largest_piece")}
+HOME |= {name: "data/agent.py" for name in ("FRAME_HEIGHT", "FRAME_WIDTH", "CAMERA_HEIGHT", "HFOV_DEG", "HALF_HFOV",
+                                          "HALF_VFOV", "FOCAL_PX", "FORWARD_STEP", "TURN", "TILT", "MAX_STEPS")}
 
 
-def test_every_shared_name_is_defined_in_compose_only():
-    for path in DATA.rglob("*.py"):
-        if path.name == "compose.py":
-            continue
+def test_every_shared_name_is_defined_in_its_one_module():
+    """The frame, PIN's camera and actions (``data.agent``) and the compositing every source shares (``compose``)
+    are each said once: no other module of the package defines them again."""
+    for path in PACKAGE.rglob("*.py"):
+        where = path.relative_to(PACKAGE).as_posix()
         tree = ast.parse(path.read_text())
         defined = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
         defined |= {t.id for n in tree.body if isinstance(n, ast.Assign) for t in ast.walk(n)
                     if isinstance(t, ast.Name) and isinstance(t.ctx, ast.Store)}
-        assert not defined & SHARED, f"{path.relative_to(DATA)} redefines {sorted(defined & SHARED)}: use compose"
+        again = sorted(name for name in defined & set(HOME) if HOME[name] != where)
+        assert not again, f"{where} defines {again} again: import them from {sorted({HOME[n] for n in again})}"
 
 
 def test_stable_seed_is_the_same_in_every_process():

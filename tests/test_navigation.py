@@ -29,6 +29,7 @@ from pin_match.evaluation.core.navigation import (
     episodes_at,
     metrics_of,
     navigation_metrics,
+    standing_point,
 )
 from pin_match.evaluation.core.sigma import SigmaChoice
 from pin_match.evaluation.core.tables import report_row, side_by_side
@@ -194,6 +195,21 @@ def test_the_floor_map_s_path_goes_around_a_wall_and_is_as_long_as_its_walk():
     apart = np.zeros((10, 10), bool)
     apart[:3], apart[6:] = True, True  # two parts of the floor: the straight line, as walk_length measures
     assert FloorMap(apart, 1.0).path(a, b).tolist() == [list(a), list(b)]
+
+
+def test_spl_s_geodesic_and_the_agent_s_walk_are_measured_on_one_floor_map():
+    """Round a wall by hand: from cell (2, 0) to cell (8, 0) past the wall's end at (5, 8), each half 3 diagonal and
+    5 straight cells of 1 m: 10 + 6 sqrt(2). The agent that commits at the start walks exactly that far to where it
+    stands beside the target, so its SPL is 1."""
+    free = np.ones((10, 10), bool)
+    free[5, :8] = False
+    floor = FloorMap(free, 1.0)
+    start, target = (2.5, 0.5), (8.6, 0.4, 0.8)  # the target on a table above cell (8, 0)
+    assert floor.geodesic(start, target[:2]) == pytest.approx(10 + 6 * math.sqrt(2))
+    geometry = EpisodeGeometry(Pose(*start, 0.0, 0.0), floor.geodesic(start, target[:2]), {"t": target}, {}, floor)
+    stand = standing_point(geometry, np.asarray(target), np.asarray(start))
+    assert tuple(stand[:2]) == (8.5, 0.5)
+    assert floor.walk_length(start, stand[:2]) == pytest.approx(geometry.geodesic_distance)
 
 
 def test_the_floor_map_stands_on_the_part_of_the_floor_the_agent_can_walk_to():
@@ -376,7 +392,7 @@ def test_a_rendered_pixel_lands_inside_its_object(tmp_path):
 
 def test_the_synthetic_generator_records_geometry(tmp_path):
     from pin_match.data.synth import SynthSize, generate
-    from pin_match.data.synth.scene import LOOKALIKE_GAP
+    from pin_match.data.synth.placing import LOOKALIKE_GAP
 
     fs = generate(tmp_path / "s", SynthSize(seed=2, episodes=2, objects_per_family=3, frames_per_episode=8), workers=1)
     g = fs.geometry
@@ -385,6 +401,8 @@ def test_the_synthetic_generator_records_geometry(tmp_path):
         e = g.episodes[record["episode_id"]]
         target = record["goals"][0]["object_id"]
         assert e.geodesic_distance == e.geodesic_to[target] > 0
+        # SPL's geodesic on the floor map the agent walks, to where it would stand beside the target
+        assert e.geodesic_distance == e.floor_map.geodesic((e.start.x, e.start.y), e.positions[target][:2])
         first = g.pose(f"{record['episode_id']}_0000")
         assert (e.start.x, e.start.y, e.start.yaw) == (first.x, first.y, first.yaw)
         # issue 59: no start within reach of the target, and the target where an agent on the floor can reach it

@@ -446,7 +446,8 @@ BIG = [(0.45, 0.8, 0.6), (0.4, 0.7, 0.5), (0.39, 0.65, 0.45), (0.33, 0.94, 0.5),
 @pytest.mark.parametrize("seed", range(40))
 def test_every_room_takes_twelve_large_objects(seed):
     """Sizes the surfaces of most rooms cannot hold: the floor along the walls takes the rest, validly."""
-    from pin_match.data.synth.scene import _overlaps, make_room, place_objects
+    from pin_match.data.synth.placing import place_objects
+    from pin_match.data.synth.scene import make_room, overlaps
 
     room = make_room(np.random.default_rng(seed))
     spots = place_objects(room, BIG, np.random.default_rng(seed + 1000))
@@ -454,7 +455,7 @@ def test_every_room_takes_twelve_large_objects(seed):
     for k, ((x, y, z, _), (radius, _, _)) in enumerate(zip(spots, BIG)):
         assert radius <= x <= room.width - radius and radius <= y <= room.depth - radius
         if z == 0.0:  # on the floor: clear of every piece of furniture
-            assert not _overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.0)
+            assert not overlaps((x - radius, y - radius, x + radius, y + radius), room.footprints, 0.0)
         for (ox, oy, oz, _), (r, _, _) in list(zip(spots, BIG))[:k]:
             if abs(oz - z) <= 0.05:
                 assert np.hypot(x - ox, y - oy) > radius + r
@@ -472,7 +473,7 @@ def _two_surface_room():
 
 
 def test_a_small_object_stands_high_when_a_high_surface_is_free():
-    from pin_match.data.synth.scene import SMALL_AREA, SMALL_MIN_HEIGHT, place_objects
+    from pin_match.data.synth.placing import SMALL_AREA, SMALL_MIN_HEIGHT, place_objects
 
     small, large = (0.04, 0.12, SMALL_AREA / 2), (0.04, 0.12, SMALL_AREA * 2)  # same footprint, other side area
     room = _two_surface_room()
@@ -488,7 +489,8 @@ def test_a_small_object_stands_high_when_a_high_surface_is_free():
 
 
 def test_small_objects_stand_high_in_generated_rooms():
-    from pin_match.data.synth.scene import SMALL_AREA, SMALL_MIN_HEIGHT, make_room, place_objects
+    from pin_match.data.synth.placing import SMALL_AREA, SMALL_MIN_HEIGHT, place_objects
+    from pin_match.data.synth.scene import make_room
 
     size = (0.05, 0.15, SMALL_AREA * 0.8)
     rooms_with_a_high_surface = 0
@@ -512,15 +514,8 @@ def _wrapped(angle: float) -> float:
 def test_products_face_the_room():
     """The side the first reference view shows turns to where the furniture's front looks, on the floor away from a
     wall it stands by, within 45 degrees either way; on a rug, which has no front, the yaw is free."""
-    from pin_match.data.synth.scene import (
-        FACE_SPREAD,
-        FLOOR_BANDS,
-        FRONT_AZIMUTH,
-        WALL_FACING,
-        Room,
-        Surface,
-        place_objects,
-    )
+    from pin_match.data.synth.placing import FACE_SPREAD, FLOOR_BANDS, FRONT_AZIMUTH, WALL_FACING, place_objects
+    from pin_match.data.synth.scene import Room, Surface
 
     room = Room(5.0, 5.0, surfaces=[Surface(1.0, 4.4, 3.0, 4.9, 0.8, 2.0, "cabinet", -np.pi / 2),
                                     Surface(2.0, 2.0, 2.8, 2.8, 0.012, 2.0, "rug")],
@@ -575,7 +570,8 @@ def test_seed_whose_surfaces_overflow_still_builds(tmp_path):
 @pytest.mark.parametrize("seed", range(6))
 def test_walk_stops_within_a_metre_facing_the_target(seed):
     from pin_match.data.agent import CAMERA_HEIGHT
-    from pin_match.data.synth.scene import make_room, place_objects
+    from pin_match.data.synth.placing import place_objects
+    from pin_match.data.synth.scene import make_room
     from pin_match.data.synth.walk import MAX_STOP, MIN_STAND, Goal, camera_walk
 
     room = make_room(np.random.default_rng(seed))

@@ -9,10 +9,11 @@ import itertools
 import numpy as np
 import pytest
 
-from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, TURN
+from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, HALF_HFOV, HALF_VFOV, TURN
 from pin_match.data.synth import tour
-from pin_match.data.synth.scene import Room, Surface, make_house, place_objects
-from pin_match.data.synth.walk import HALF_HFOV, HALF_VFOV, Grid, _main_floor
+from pin_match.data.synth.placing import place_objects
+from pin_match.data.synth.scene import Room, Surface, make_house
+from pin_match.data.synth.walk import Grid, _main_floor
 
 ROOMS = 3
 LIMIT = 1000  # PIN's episode limit: the budget the generator passes

@@ -14,7 +14,8 @@ from collections.abc import Sequence
 import cv2
 import numpy as np
 
-FRAME_HEIGHT, FRAME_WIDTH = 640, 360
+from pin_match.data.agent import FRAME_HEIGHT, FRAME_WIDTH
+
 LETTERBOX_GREY = 114  # the grey of YOLO-style letterboxing: neither black nor white, rare in photos
 
 

@@ -138,6 +138,12 @@ class FloorMap:
         return float(walked + ends) if np.isfinite(walked) else float(np.hypot(*(np.asarray(b_xy)[:2] -
                                                                                    np.asarray(a_xy)[:2])))
 
+    def geodesic(self, start_xy: Sequence[float], goal_xy: Sequence[float]) -> float:
+        """PIN's ``geodesic_distance`` as a synthetic set measures it: the shortest walk on this map from the start to
+        where an agent walking to the goal stands (``stand``), on the graph and with the stopping rule of the agent's
+        own walk to a goal (``walk_length``), so SPL's two sides are measured alike."""
+        return self.walk_length(start_xy, self.stand(np.asarray(goal_xy, np.float64)[:2], np.asarray(start_xy)[:2]))
+
     def path(self, a_xy: Sequence[float], b_xy: Sequence[float]) -> np.ndarray:
         """The shortest walk of ``walk_length`` as waypoints (K, 2), from ``a_xy`` through the standable cells'
         centres to ``b_xy``; the straight line where no walk joins them."""

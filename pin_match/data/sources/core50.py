@@ -142,16 +142,17 @@ def _at_commit(repo: str, checkout: Path) -> str:
 
 
 def _make(out: Path, *, variant: str, seed: int, src: Path | None, overwrite: bool) -> FrameSet:
-    """The look-alike set; the approach variant without the photos ``CORE50_BAD_MASKS`` names (see there)."""
-    leave_out = CORE50_BAD_MASKS if variant == "approach" else ()
+    """The look-alike set; a walk variant without the photos ``CORE50_BAD_MASKS`` names (see there)."""
+    leave_out = CORE50_BAD_MASKS if variant in lookalike_set.WALKS else ()
     return lookalike_set.build(out, src, variant=variant, seed=seed, overwrite=overwrite, leave_out=leave_out)
 
 
 SOURCE = register(DataSource(
     name="core50",
     summary="real look-alikes shipped with pin_match: CORe50 photos of 10 categories of hand-held objects, as "
-            "shot, pasted into TUM office rooms, or pasted as walks that approach the target (approach: the demo's "
-            "real set; docs/lookalike-set.md)",
+            "shot, pasted into TUM office rooms, or pasted along walks through a room (walk: in an order blind to "
+            "the target, the demo's real set; approach: ending at the target, a first-match stress test; "
+            "docs/lookalike-set.md)",
     licence="CC BY 4.0 (CORe50, Lomonaco & Maltoni 2017; TUM RGB-D rooms, Sturm et al. 2012)",
     variants=lookalike_set.VARIANTS, make=_make, src=SRC_OPTIONAL,
     prepare_inputs=("CORE50_REPO", "ROOMS_REPO"), make_source=prepare_core50))

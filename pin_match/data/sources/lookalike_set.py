@@ -11,11 +11,14 @@ write one (see docs/lookalike-set.md); ``build`` turns it into a frame-set in on
 - ``shot``: the photo is the frame (letterboxed into the 640x360 portrait frame, grey bars), so
   the object keeps its real surroundings, hand and lighting;
 - ``pasted``: the object is cut out with its mask and pasted into a real indoor room photo;
-- ``approach``: pasted, as a walk through one room that ends at the target, as PIN's episodes
-  do: the look-alikes, other objects and empty views first (in random order), then each target
-  photo at ``APPROACH_DISTANCES_M``, far to near; and the splits of ``balanced_splits``, so
-  each split has its share of the instances that can be targets (the set for a table that
-  needs many val target frames).
+- ``walk``: pasted, as a walk through one room that meets each object once, in an order drawn
+  without knowing which is the target (``walk_plan``): an object's photos one after the other,
+  the target's each at ``APPROACH_DISTANCES_M``, far to near, as the agent walks up to it; and
+  the splits of ``balanced_splits``, so each split has its share of the instances that can be
+  targets (the demo's real set);
+- ``approach``: as ``walk``, but the walk ends at the target (the look-alikes, other objects and
+  empty views first): a stress test of PIN's first match, which meets every look-alike before
+  the target; a rule that waits would be told where the target is.
 
 One episode per target instance that has a same-category look-alike and at least two photos: its
 3 reference views come from its first photos (RGBA, alpha = mask), its frames are its other photos,
@@ -30,16 +33,15 @@ same bytes.
 
 from __future__ import annotations
 
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass, replace
 from pathlib import Path
 
 import cv2
 import numpy as np
 
+from pin_match.data.agent import FOCAL_PX, FRAME_HEIGHT, FRAME_WIDTH
 from pin_match.data.compose import (
-    FRAME_HEIGHT,
-    FRAME_WIDTH,
     cutout,
     letterbox,
     paste,
@@ -63,14 +65,14 @@ from pin_match.data.sources.photo_folder import (
 from pin_match.data.writer import FrameSetWriter
 
 LOOKALIKES_VERSION = 1
-VARIANTS = ("shot", "pasted", "approach")
+VARIANTS = ("shot", "pasted", "walk", "approach")
+WALKS = ("walk", "approach")  # the variants pasted along a walk through one room
 N_REFERENCE_PHOTOS = 3
 N_OTHER_FRAMES = 4
 N_EMPTY_FRAMES = 3
 
 # PIN's camera: 360 px wide, horizontal field of view 42 degrees (as the synthetic set), so a focal length of
 # 180 / tan(21 deg) = 469 px; an object of longest side L metres at D metres spans 469 * L / D pixels
-PIN_FOCAL_PX = 180 / np.tan(np.radians(21))
 PASTE_OBJECT_M = 0.6  # the larger personal objects of PIN (a backpack, a bag, a teddy bear)
 PASTE_DISTANCE_M = (1.0, 3.0)
 APPROACH_DISTANCES_M = (3.0, 2.6, 2.2, 1.8, 1.4, 1.0)  # an approach shows each target photo at these, far to near
@@ -84,8 +86,8 @@ class EpisodePlan:
     target: str
     reference_photos: tuple[str, ...]
     frames: tuple[tuple[str, str], ...]  # (kind, photo_id or room_id); kind in target, lookalike, other, empty
-    distances: tuple[float | None, ...] = ()  # approach: metres per frame (None: drawn); else empty
-    room: str = ""  # approach: the one room the walk is in
+    distances: tuple[float | None, ...] = ()  # a walk: metres per frame (None: drawn); else empty
+    room: str = ""  # a walk: the one room it is in
 
 
 def reference_photos(own: Sequence[Photo], *, keep_one: bool) -> list[Photo]:
@@ -139,6 +141,31 @@ def plan_episodes(photos: Sequence[Photo], room_ids: Sequence[str], seed: int = 
     return plans
 
 
+def walk_plan(plan: EpisodePlan, room_ids: Sequence[str], instance_of: Mapping[str, str],
+              seed: int = 0) -> EpisodePlan:
+    """``plan`` as a walk in one room that meets each object once, in a seeded order no role decides.
+
+    The frames group by what they show: each instance's photos (``instance_of`` a photo id) one after the other,
+    the target's each at every distance of ``APPROACH_DISTANCES_M`` (the agent walks up to it), each empty view
+    alone (the walk's room); the groups are then shuffled uniformly, so the target is met first, last or between
+    as often as any other object.
+    """
+    rng = np.random.default_rng(stable_seed(seed, "walk", plan.episode_id))
+    room = room_ids[int(rng.integers(len(room_ids)))]
+    groups: dict[object, list[tuple[str, str, float | None]]] = {}
+    for k, (kind, item) in enumerate(plan.frames):
+        if kind == "empty":
+            groups[("empty", k)] = [(kind, room, None)]
+        elif kind == "target":
+            groups.setdefault(instance_of[item], []).extend((kind, item, d) for d in APPROACH_DISTANCES_M)
+        else:
+            groups.setdefault(instance_of[item], []).append((kind, item, None))
+    keys = list(groups)
+    walk = [frame for k in rng.permutation(len(keys)) for frame in groups[keys[int(k)]]]
+    return replace(plan, frames=tuple((kind, item) for kind, item, _ in walk),
+                   distances=tuple(d for *_, d in walk), room=room)
+
+
 def approach_plan(plan: EpisodePlan, room_ids: Sequence[str], seed: int = 0) -> EpisodePlan:
     """``plan`` as a walk in one room that meets everything else first and ends at its target.
 
@@ -173,7 +200,7 @@ def paste_into(room: np.ndarray, obj: np.ndarray, rng: np.random.Generator,
     objects PIN asks for at the distances it is seen from, not the few dozen pixels a mug
     would take (the 128 px photos hold no detail at that size).
     """
-    size = PIN_FOCAL_PX * PASTE_OBJECT_M / (float(rng.uniform(*PASTE_DISTANCE_M)) if distance is None else distance)
+    size = FOCAL_PX * PASTE_OBJECT_M / (float(rng.uniform(*PASTE_DISTANCE_M)) if distance is None else distance)
     h, w = obj.shape[:2]
     s = size / max(h, w)
     nw, nh = min(max(int(round(w * s)), 1), FRAME_WIDTH), min(max(int(round(h * s)), 1), FRAME_HEIGHT)
@@ -206,10 +233,13 @@ def build(out: str | Path, src: str | Path | None = None, *, variant: str = "sho
     photos = [p for p in every_photo if p.photo_id not in leave_out]
     rooms = read_rows(src / "rooms.csv", ROOM_COLUMNS, LookalikeError)
     folder = _SourceFolder(src, {p.photo_id: p for p in photos}, {r["room_id"]: src / r["file"] for r in rooms})
-    split = balanced_splits(photos) if variant == "approach" else instance_splits(photos)
+    split = balanced_splits(photos) if variant in WALKS else instance_splits(photos)
     plans = plan_episodes(photos, sorted(folder.room_file), seed, split)
     if variant == "approach":
         plans = [approach_plan(p, sorted(folder.room_file), seed) for p in plans]
+    if variant == "walk":
+        instance_of = {p.photo_id: p.instance_id for p in photos}
+        plans = [walk_plan(p, sorted(folder.room_file), instance_of, seed) for p in plans]
     # "generator" is the name frame-sets of this builder have always recorded, not a module path: moving the
     # code must not change a frame-set's bytes
     provenance = dict(generator="pin_match.lookalikes", version=LOOKALIKES_VERSION, variant=variant, seed=seed,
@@ -283,11 +313,11 @@ def _objects_used(plans: Sequence[EpisodePlan], by_id: dict[str, Photo]) -> dict
 
 def _object_frame(rgb: np.ndarray, mask: np.ndarray, variant: str, plan: EpisodePlan, step: int,
                   room_file: dict[str, Path], rng: np.random.Generator) -> tuple[np.ndarray, np.ndarray]:
-    """A photo as the frame (``shot``), or its object pasted into a room (``pasted``: a random room; ``approach``:
-    the walk's room, at the plan's distance); with the object's mask."""
+    """A photo as the frame (``shot``), or its object pasted into a room (``pasted``: a random room; a walk: the
+    walk's room, at the plan's distance); with the object's mask."""
     if variant == "shot":
         return letterbox(rgb, mask, rng)
-    if variant == "approach":
+    if variant in WALKS:
         room = room_crop(read_image(room_file[plan.room]), rng)
         return paste_into(room, cutout(rgb, mask), rng, plan.distances[step])
     room = room_crop(read_image(room_file[sorted(room_file)[int(rng.integers(len(room_file)))]]), rng)

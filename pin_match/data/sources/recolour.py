@@ -24,9 +24,8 @@ from pathlib import Path
 import cv2
 import numpy as np
 
+from pin_match.data.agent import FRAME_HEIGHT, FRAME_WIDTH
 from pin_match.data.compose import (
-    FRAME_HEIGHT,
-    FRAME_WIDTH,
     paste,
     room_crop,
     rotate_hue,

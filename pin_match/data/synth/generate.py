@@ -15,8 +15,8 @@ from pathlib import Path
 
 import numpy as np
 
-from pin_match.data.agent import CAMERA_HEIGHT, HFOV_DEG
-from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
+from pin_match.data.agent import CAMERA_HEIGHT, FRAME_HEIGHT, FRAME_WIDTH, HFOV_DEG
+from pin_match.data.compose import stable_seed
 from pin_match.data.digest import files_digest
 from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import CameraModel, EpisodeGeometry, FloorMap
@@ -30,11 +30,12 @@ from pin_match.data.synth.scene import Room
 from pin_match.data.synth.sensor import develop_view, reference_camera
 from pin_match.data.synth.size import DEFAULT_SIZE, GENERATOR, WALKS, SynthSize
 from pin_match.data.synth.tour import exploration_walk
-from pin_match.data.synth.walk import Pose, camera_walk, floor_map, geodesic_lengths
+from pin_match.data.synth.walk import Pose, camera_walk, floor_map
 from pin_match.data.writer import FrameRecord, FrameSetWriter, ObjectOrigin, encode_frame
 
-GENERATOR_VERSION = 9  # 8: approach views of every annotated object after the walk; 9: tours of the whole house,
-# no approach views (the closed loop renders each walk-up on demand: ``walkups``)
+GENERATOR_VERSION = 10  # 8: approach views of every annotated object after the walk; 9: tours of the whole house,
+# no approach views (the closed loop renders each walk-up on demand: ``walkups``); 10: geodesic lengths on the
+# floor map (``FloorMap.geodesic``), the camera's constants from ``data.agent``
 TARGETS_PER_HOUSE = 3  # episodes per house: one render of the exploration walk serves each
 SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
 DEFINITION_READS = ("data/agent.py", "data/compose.py", "data/geometry.py", "data/synth/*.py")  # the code a house is
@@ -124,7 +125,7 @@ def _episode_geometry(ids: list[str], families: list[str], target: int, house: R
     """Where the walk starts, every annotated object's centre, the geodesic length to the target and to each of its
     same-family look-alikes, and where an agent can stand."""
     measured = [target] + [k for k, f in enumerate(families) if f == families[target] and k != target]
-    lengths = geodesic_lengths(house, stage.obstacles, walk[0][:2], [stage.centres[k][:2] for k in measured])
+    lengths = [floor.geodesic(walk[0][:2], stage.centres[k][:2]) for k in measured]
     x, y, yaw, _ = walk[0]
     return EpisodeGeometry(CameraPose(x, y, 0.0, yaw), lengths[0], dict(zip(ids, stage.centres)),
                            {ids[k]: length for k, length in zip(measured, lengths)}, floor)

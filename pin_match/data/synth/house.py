@@ -12,13 +12,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pin_match.data.agent import CAMERA_HEIGHT, HFOV_DEG
-from pin_match.data.compose import FRAME_HEIGHT, FRAME_WIDTH, stable_seed
+from pin_match.data.agent import CAMERA_HEIGHT, FRAME_HEIGHT, FRAME_WIDTH, HFOV_DEG
+from pin_match.data.compose import stable_seed
 from pin_match.data.geometry import Pose as CameraPose
 from pin_match.data.synth.clutter import colour_double
 from pin_match.data.synth.objects import ObjectSpec
+from pin_match.data.synth.placing import place_objects
 from pin_match.data.synth.render import Camera, Light, Renderer, vertical_fov
-from pin_match.data.synth.scene import Room, make_house, place_objects
+from pin_match.data.synth.scene import Room, make_house
 from pin_match.data.synth.sensor import Sensor, house_camera
 from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.walk import Goal, Pose, floor_map

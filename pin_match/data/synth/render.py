@@ -15,7 +15,7 @@ import cv2
 import numpy as np
 import pybullet as p
 
-from pin_match.data.synth.scene import FRONT_AZIMUTH
+from pin_match.data.synth.placing import FRONT_AZIMUTH
 from pin_match.data.synth.shapes import Mesh
 
 NEAR, FAR = 0.03, 30.0

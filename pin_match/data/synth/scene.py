@@ -8,7 +8,7 @@ away from the room's middle and out of the doorways, so the camera walk always h
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -96,14 +96,15 @@ def _rotate_layout(specs, surfaces, w: float, d: float, quarter: int, x: float, 
             sx, sy = sy, sx
         placed.append(((sx, sy, sz), (*tr(cx, cy), cz)))
     surf = []
-    facing = _wrap(-np.pi / 2 + quarter * np.pi / 2)  # the local front (-y) after the quarter turns
+    facing = wrap_angle(-np.pi / 2 + quarter * np.pi / 2)  # the local front (-y) after the quarter turns
     for s in surfaces:
         (ax, ay), (bx, by) = tr(s.x0, s.y0), tr(s.x1, s.y1)
         surf.append(Surface(min(ax, bx), min(ay, by), max(ax, bx), max(ay, by), s.z, s.clearance, s.kind, facing))
     return placed, surf
 
 
-def _wrap(angle: float) -> float:
+def wrap_angle(angle: float) -> float:
+    """An angle in [-pi, pi)."""
     return float((angle + np.pi) % (2 * np.pi) - np.pi)
 
 
@@ -172,7 +173,7 @@ WALL = 0.1  # a wall's thickness; two rooms of a house stand two walls apart
 DOORWAY_CLEAR = 1.2  # metres into a room in front of a doorway that furniture and floor objects keep free
 ROOM_SIZE = ((4.5, 6.5), (4.5, 7.0))  # a room's width and depth range (metres)
 HOUSE_ROOM_SIZE = ((3.6, 4.6), (3.8, 5.0))  # a house's rooms, smaller: a house of three is PIN's scale ...
-HOUSE_FURNITURE = (3, 5)  # ... with fewer pieces each, so an exploration's step budget sees most of the house
+HOUSE_FURNITURE = (3, 5)  # ... with fewer pieces each (pieces a room, drawn between these, both included)
 
 
 def make_room(rng: np.random.Generator, size: tuple[float, float] | None = None,
@@ -285,7 +286,8 @@ def _wall_decor(room: Room, rng: np.random.Generator, woods: list[np.ndarray], d
             room.pieces.append(Piece(box(w, 0.03, h).moved((rng.uniform(w, W - w), D - 0.015, 1.6)), art))
 
 
-def _overlaps(rect, others, margin: float) -> bool:
+def overlaps(rect, others, margin: float) -> bool:
+    """Does the rectangle come within ``margin`` of any of ``others`` (x0, y0, x1, y1 each)?"""
     x0, y0, x1, y1 = rect
     return any(x0 < b[2] + margin and b[0] < x1 + margin and y0 < b[3] + margin and b[1] < y1 + margin
                for b in others)
@@ -315,8 +317,8 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray], coun
             else:
                 x, y = W - fw / 2 - 0.02, rng.uniform(fd / 2, D - fd / 2)
             rect = (x - fw / 2, y - fd / 2, x + fw / 2, y + fd / 2)
-            if rect[0] < 0 or rect[1] < 0 or rect[2] > W or rect[3] > D or _overlaps(rect, room.footprints, 0.7) \
-                    or _overlaps(rect, clear, 0.0):
+            if rect[0] < 0 or rect[1] < 0 or rect[2] > W or rect[3] > D or overlaps(rect, room.footprints, 0.7) \
+                    or overlaps(rect, clear, 0.0):
                 continue
             placed, surf = _rotate_layout(boxes, surfaces, w, d, quarter, x, y)
             room.pieces.append(Piece(_boxes(placed), _material(kind, rng, woods)))
@@ -326,7 +328,7 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray], coun
     for _ in range(int(rng.integers(0, 3))):  # plants in free corners: clutter without surfaces
         x, y = rng.choice([0.35, W - 0.35]), rng.choice([0.35, D - 0.35])
         rect = (x - 0.25, y - 0.25, x + 0.25, y + 0.25)
-        if _overlaps(rect, room.footprints, 0.05) or _overlaps(rect, clear, 0.0):
+        if overlaps(rect, room.footprints, 0.05) or overlaps(rect, clear, 0.0):
             continue
         h = rng.uniform(0.6, 1.4)
         pot = cylinder(0.16, 0.35, 16, top_radius=0.2).moved((x, y, 0))
@@ -335,141 +337,3 @@ def _furnish(room: Room, rng: np.random.Generator, woods: list[np.ndarray], coun
         room.pieces.append(Piece(pot, tx.solid(tx.rgb(str(rng.choice(["white", "coral", "grey"]))), rng)))
         room.pieces.append(Piece(leaves, tx.fabric(rng, tx.rgb(str(rng.choice(["green", "dark green", "olive"]))))))
         room.footprints.append(rect)
-
-
-Reach = Callable[[float, float, float], bool]  # whether an agent on the floor gets close enough to a point x, y, z
-
-
-def place_objects(room: Room, sizes: list[tuple[float, float, float]], rng: np.random.Generator,
-                  families: Sequence[int | None] = (), reach: Reach | None = None,
-                  ) -> list[tuple[float, float, float, float]]:
-    """Stand objects (radius, height, side area) on free spots of the room's surfaces: (x, y, z, yaw) each.
-
-    Surfaces are drawn with weight sqrt(area), so big tables collect more objects than a
-    nightstand, but every kind of surface gets used; shelves only take what fits under the
-    next board; the rug takes no small object, which a camera 1.31 m high would never see
-    larger than a speck; a small product (a bottle, an ink box, a game case, under
-    ``SMALL_AREA`` seen side-on) stands on a surface at least ``SMALL_MIN_HEIGHT`` high where
-    the room has one free, since on a coffee table or a sofa seat it stays under 1,500 pixels
-    even from where an agent stops beside it. An object that fits on no surface (a big one in
-    a room of small furniture, or one that comes after the surfaces filled up) stands on the
-    floor along a wall, clear of furniture, as large objects do in a real house; the room's
-    middle stays free for the camera walk. Every draw comes from ``rng``, so the result is
-    still a pure function of the seeds. Only a room without any free floor along its walls is
-    an error.
-
-    ``families`` labels the annotated objects (the first ``len(families)`` of ``sizes``; None: not
-    annotated): two of one family (a target and its look-alike, whichever is the target) stand at
-    least ``LOOKALIKE_GAP`` apart where the house allows it, as PIN's look-alikes stand elsewhere in
-    the house: an agent that stops at a look-alike is then more than PIN's 1 m success distance from
-    the target, a category error and not a success.
-
-    Products face the room, as they stand in a house: the side the first reference view shows
-    (``FRONT_AZIMUTH`` of the object) is turned to where its furniture's front looks, or away from
-    the wall it stands against, give or take ``FACE_SPREAD``; on a rug, which has no front, the
-    yaw is uniform.
-
-    With ``reach``, the annotated objects stand only where it holds for their centre (an
-    agent standing on the floor beside the furniture can come within PIN's success distance of them),
-    as PIN's episodes place the objects an agent must reach; where no spot passes, the rule is
-    dropped for that object rather than the episode.
-    """
-    taken: list[tuple[float, float, float, float]] = []  # x, y, z, radius
-    out = []
-    for k, (radius, height, side_area) in enumerate(sizes):
-        family = families[k] if k < len(families) else None
-        away = tuple((x, y) for (x, y, _, _), f in zip(taken, families) if f is not None and f == family) or None
-        near = None
-        if reach is not None and family is not None:
-            def near(x: float, y: float, z: float, half: float = height / 2) -> bool:
-                return reach(x, y, z + half)
-        spot = None
-        for keep_away, keep_near in dict.fromkeys([(away, near), (None, near), (away, None), (None, None)]):
-            spot = _spot(room, (radius, height, side_area), taken, rng, keep_away, keep_near)
-            if spot is not None:
-                break
-        if spot is None:
-            raise ValueError(f"no free surface or floor spot for an object of radius {radius:.2f} m in a "
-                             f"{room.width:.1f} x {room.depth:.1f} m room")
-        x, y, z, facing = spot
-        taken.append((x, y, z, radius))
-        turn = float(rng.uniform(-1.0, 1.0))
-        out.append((x, y, z, turn * np.pi if facing is None else _wrap(facing - FRONT_AZIMUTH + turn * FACE_SPREAD)))
-    return out
-
-
-Away = tuple[tuple[float, float], ...] | None  # points (x, y) a spot keeps LOOKALIKE_GAP from, or no constraint
-Spot = tuple[float, float, float, float | None]  # x, y, z and the direction the spot faces the room (or None)
-
-
-def _spot(room: Room, size: tuple[float, float, float], taken: list[tuple[float, float, float, float]],
-          rng: np.random.Generator, away: Away, near: Reach | None = None) -> Spot | None:
-    """A surface spot (a high one first for a small product), else the floor along a wall; None if neither."""
-    radius, height, side_area = size
-    weights = np.array([np.sqrt(s.area) for s in room.surfaces])
-    high = np.array([s.z >= SMALL_MIN_HEIGHT for s in room.surfaces])
-    fits = np.array([s.clearance > height and s.x1 - s.x0 > 2 * radius and s.y1 - s.y0 > 2 * radius
-                     and not (s.kind == "rug" and radius < SMALL_ON_FLOOR) for s in room.surfaces])
-    spot = None
-    if side_area < SMALL_AREA:
-        spot = _surface_spot(room, weights * fits * high, radius, taken, rng, away, near)
-    spot = spot or _surface_spot(room, weights * fits, radius, taken, rng, away, near)
-    if spot is None:
-        floor = _floor_spot(room, radius, taken, rng, away, near)
-        spot = None if floor is None else (floor[0], floor[1], 0.0, floor[2])
-    return spot
-
-
-def _allowed(x: float, y: float, z: float, away: Away, near: Reach | None) -> bool:
-    """Far enough from what ``away`` names, and within reach where ``near`` asks it, of a spot on a surface at z."""
-    return (away is None or all(np.hypot(x - ax, y - ay) >= LOOKALIKE_GAP for ax, ay in away)) and \
-        (near is None or near(x, y, z))
-
-
-def _surface_spot(room: Room, p: np.ndarray, radius: float, taken: list[tuple[float, float, float, float]],
-                  rng: np.random.Generator, away: Away = None, near: Reach | None = None) -> Spot | None:
-    """A free spot (x, y, z, facing) on a surface drawn with weights ``p``, clear of the objects already placed and
-    where ``near`` holds; or None."""
-    for _ in range(200 if p.sum() else 0):
-        s = room.surfaces[int(rng.choice(len(room.surfaces), p=p / p.sum()))]
-        x, y = rng.uniform(s.x0 + radius, s.x1 - radius), rng.uniform(s.y0 + radius, s.y1 - radius)
-        if _allowed(x, y, s.z, away, near) and all(abs(z - s.z) > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
-                                    for ox, oy, z, r in taken):
-            return float(x), float(y), float(s.z), s.facing
-    return None
-
-
-SMALL_ON_FLOOR = 0.12  # objects of a smaller radius go on furniture: seen from 1.31 m on the floor they stay specks
-SMALL_AREA = 0.01  # m^2 seen side-on: a supplement bottle (0.004), an ink box (0.008), a game case (0.007)
-SMALL_MIN_HEIGHT = 0.78  # cabinets and the upper shelf boards: shallow, so a camera can stand within 0.6 m
-FLOOR_BANDS = (0.4, 0.8, 1.6, 100.0)  # how far from a wall a floor object may stand (metres), relaxed in turn
-LOOKALIKE_GAP = 2.2  # metres between the target and a look-alike: more than PIN's 1 m success distance twice over
-FRONT_AZIMUTH = np.radians(-60.0)  # the side of an object its first reference view shows (render.reference_views)
-FACE_SPREAD = np.radians(45.0)  # how far a product's front may turn from the room-facing direction, either way
-WALL_FACING = (np.pi / 2, -np.pi / 2, 0.0, np.pi)  # into the room from the walls y = 0, y = D, x = 0, x = W
-
-
-def _floor_spot(room: Room, radius: float, taken: list[tuple[float, float, float, float]],
-                rng: np.random.Generator, away: Away = None, near: Reach | None = None,
-                tries: int = 500) -> tuple[float, float, float] | None:
-    """A free floor position (x, y, the direction into the room from its wall) for an object of ``radius``, clear of
-    furniture and other objects; None if none.
-
-    Close to a wall first, so the room's middle stays free for the camera walk; the band
-    widens only when the walls are full.
-    """
-    W, D = room.width, room.depth
-    lo = radius + 0.05
-    for band in FLOOR_BANDS:
-        for _ in range(tries):
-            wall, t, u = int(rng.integers(4)), rng.uniform(lo, max(W, D) - lo), rng.uniform(lo, lo + band)
-            x, y = ((t, u), (t, D - u), (u, t), (W - u, t))[wall]
-            if not (lo <= x <= W - lo and lo <= y <= D - lo):
-                continue
-            spot = (x - radius, y - radius, x + radius, y + radius)
-            if _overlaps(spot, room.footprints, 0.05) or _overlaps(spot, room.keep_clear, 0.0):
-                continue
-            if _allowed(x, y, 0.0, away, near) and all(z > 0.05 or np.hypot(x - ox, y - oy) > radius + r + 0.02
-                                                       for ox, oy, z, r in taken):
-                return float(x), float(y), WALL_FACING[wall]
-    return None

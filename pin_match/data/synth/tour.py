@@ -32,12 +32,10 @@ from itertools import combinations
 
 import numpy as np
 
-from pin_match.data.agent import CAMERA_HEIGHT, TILT, TURN
+from pin_match.data.agent import CAMERA_HEIGHT, HALF_HFOV, HALF_VFOV, TILT, TURN
 from pin_match.data.synth.scene import Room, Surface
 from pin_match.data.synth.walk import (
     CELL,
-    HALF_HFOV,
-    HALF_VFOV,
     Grid,
     Pose,
     _start,
@@ -63,7 +61,7 @@ EDGE = np.radians(5)  # a point aimed at stays this far inside the frame's top a
 SIDE = np.radians(3)  # ... and this far inside its sides
 SHELF_AHEAD = 0.15  # a shelf is looked into from in front of it only (metres ahead of its front), its side panels and
 # back being solid
-WALL_BAND = 0.5  # metres from a wall where objects that fit no surface stand (``scene.FLOOR_BANDS``' first band)
+WALL_BAND = 0.5  # metres from a wall where objects that fit no surface stand (``placing.FLOOR_BANDS``' first band)
 
 
 @dataclass(frozen=True)
@@ -116,7 +114,7 @@ def exploration_walk(room: Room, obstacles: list[tuple[float, float, float, floa
 def _pieces(room: Room) -> list[_Piece]:
     """The places objects stand, as the tour visits them: the surfaces of one piece of furniture together (those
     over its footprint), each rug alone, and per room the floor along its walls: a band ``WALL_BAND`` wide, off
-    the furniture and the doorways (where ``scene.place_objects`` stands what fits no surface)."""
+    the furniture and the doorways (where ``placing.place_objects`` stands what fits no surface)."""
     grouped: dict[object, list[Surface]] = {}
     for s in room.surfaces:
         cx, cy = (s.x0 + s.x1) / 2, (s.y0 + s.y1) / 2

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, TURN
+from pin_match.data.agent import CAMERA_HEIGHT, FOCAL_PX, FORWARD_STEP, HALF_VFOV, TURN
 from pin_match.data.geometry import AGENT_RADIUS, FloorMap
 from pin_match.data.synth.scene import Room
 
@@ -41,14 +41,11 @@ MAP_CELL = 0.05  # the stored floor map's cell: finer than the walk's, since a s
 START_AWAY = 2.0  # metres of walk at least from the start to the target: PIN's 1 m success distance and as much again
 CLEARANCE = 0.3  # the camera body's radius while exploring
 NEAR_CLEARANCE = 0.1  # how close to furniture the camera may stand when it stops beside an object
-FOCAL_PX = 469.0  # the frame's focal length in pixels (360 px wide, HFOV 42 degrees)
 STOP_PIXELS = 12000.0  # the stop distance shows the object at about this many pixels ...
 MAX_STOP = 1.0  # ... but never further than this on the floor (PIN's success radius)
 MIN_STOP = 0.45  # the closest a stop may be (3D distance from the camera to the object's centre) ...
 MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal distance)
 SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
-HALF_VFOV = np.radians(34.3)  # half the vertical field of view of the 640 x 360 portrait frame
-HALF_HFOV = np.radians(21.0)  # half its horizontal field of view
 RUN = (1.0, 1.75)  # the straight run at an object starts this far (metres) behind its stop: the target and a
 # look-alike passed on the way alike, so neither is met larger by construction
 APPROACH_FRAMES = 40  # about what the two approaches take, walking there included; exploration gets the rest
@@ -210,19 +207,6 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
         walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], RUN, stop=False)
     walk.approach(target, RUN, stop=True)
     return walk.poses
-
-
-def geodesic_lengths(room: Room, obstacles: list[tuple[float, float, float, float]], start: Sequence[float],
-                     goals: Sequence[Sequence[float]]) -> list[float]:
-    """PIN's ``geodesic_distance`` from ``start`` (x, y) to each goal (x, y): the shortest walk on the camera's grid
-    to a reachable cell, then the straight stretch from that cell to the object (which stands on furniture or a
-    rug the walk keeps clear of)."""
-    grid = Grid(room, obstacles)
-    dist = grid.path_lengths(grid.cell(start))
-    cells = np.argwhere(np.isfinite(dist))
-    walked = dist[cells[:, 0], cells[:, 1]]
-    centres = (cells + 0.5) * CELL
-    return [float(np.min(walked + np.hypot(centres[:, 0] - g[0], centres[:, 1] - g[1]))) for g in goals]
 
 
 def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, float]],

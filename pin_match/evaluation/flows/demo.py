@@ -64,11 +64,11 @@ def scanned(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> Fr
 
 
 def lookalikes(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> FrameSet:
-    """The CORe50 look-alikes pasted along approach walks through real rooms (the photos shipped with pin_match;
-    pasting is cheap, so both splits are built even for a run that reads val only)."""
+    """The CORe50 look-alikes pasted along walks through real rooms, in an order blind to the target (the photos
+    shipped with pin_match; pasting is cheap, so both splits are built even for a run that reads val only)."""
     from pin_match.data.sources import get
 
-    return get("core50").build(out, "approach", seed)
+    return get("core50").build(out, "walk", seed)
 
 
 @dataclass(frozen=True)
@@ -115,14 +115,15 @@ SCANNED = DemoSet("scanned look-alikes", "",
                   "target (AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
                   "scanned.json",
                   ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", "data/synth/*.py",
-                   "data/compose.py"))
+                   "data/compose.py", "data/agent.py"))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",
                      "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet "
-                     "real look-alikes of the target's category first and end at the target (AUROC-same: target vs "
-                     "look-alike frames)", lookalikes, ("verify", "effnet", "color"), "lookalikes.json",
+                     "each object once, in an order drawn without knowing the target, real look-alikes of its "
+                     "category among them (AUROC-same: target vs look-alike frames)", lookalikes,
+                     ("verify", "effnet", "color"), "lookalikes.json",
                      ("data/sources/lookalike_src/*.csv", "data/sources/lookalike_src/*.md",
                       "data/sources/lookalike_src/*/*", "data/sources/core50.py", "data/sources/lookalike_set.py",
-                      "data/sources/photo_folder.py", "data/compose.py"))
+                      "data/sources/photo_folder.py", "data/compose.py", "data/agent.py"))
 DEMO_SETS = (LOOKALIKES, SCANNED)  # the page leads with the real photos, where recognition can be measured
 
 
