@@ -90,6 +90,15 @@ def upward(me: str, targets: set[str]) -> list[str]:
     return out
 
 
+MAX_MODULE_LINES = 400  # a module a reader holds at once (the developers' guide): past it, cut along its jobs
+
+
+def test_every_module_is_under_400_lines():
+    long = {path.relative_to(ROOT).as_posix(): n for folder in ("pin_match", "matchers", "benchmarks")
+            for path in (ROOT / folder).rglob("*.py") if (n := len(path.read_text().splitlines())) >= MAX_MODULE_LINES}
+    assert not long, f"modules of {MAX_MODULE_LINES} lines or more: {long}"
+
+
 def test_imports_run_only_downward():
     found = [v for p in library_files() if module_name(p) not in FACE for v in upward(module_name(p), imports_of(p))]
     assert not found, "imports that do not run downward:\n" + "\n".join(found)
