@@ -99,7 +99,7 @@ def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: 
         return None if places is None else lambda s: walk_decisions(places, s, candidate)[0]
 
     best = None
-    for candidate in _second_lines(ctx, table, split, policy):
+    for candidate in _with_each_second_line(ctx, table, split, policy):
         curve = objective_curve(ctx, table, split, objective, candidate) if navigation else \
             policy_sweep(arr, candidate, decisions_at(candidate))
         index, value = choose_sigma(curve, objective, match_floor)
@@ -115,7 +115,7 @@ def tune_policy(table: ScoreTable, fs: FrameSet, policy: StopPolicy, objective: 
                 date=dt.datetime.now(dt.timezone.utc).isoformat(timespec="seconds"))
 
 
-def _second_lines(ctx: EvalContext, table: ScoreTable, split: str, policy: StopPolicy) -> list[StopPolicy]:
+def _with_each_second_line(ctx: EvalContext, table: ScoreTable, split: str, policy: StopPolicy) -> list[StopPolicy]:
     """The policies ``tune_policy`` tries: ``policy`` itself, and for an approach without a second line each of
     ``SECOND_LINE_LEVELS`` (quantiles of the split's recorded approach views' scores, of its walk's where it has none:
     a synthetic set's walk-ups are rendered only as a policy walks up)."""
