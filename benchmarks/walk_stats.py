@@ -81,7 +81,7 @@ def tour(fs: FrameSet, houses: dict) -> dict:
 
 def rendered(fs: FrameSet, per_episode) -> int:
     """Frames rendered: an exploration walk once per house, a walk that heads for its target once per episode."""
-    if fs.manifest["provenance"].get("walk", "approach") == "approach":
+    if fs.manifest["provenance"].get("walk") != "explore":
         return int(per_episode.sum())
     house = fs.episodes.set_index("episode_id").scene_id
     return int(per_episode.groupby(house.loc[per_episode.index].to_numpy()).first().sum())

@@ -6,6 +6,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -282,6 +283,17 @@ def test_a_set_this_install_would_stage_differently_is_refused(tiny_synth, tmp_p
     manifest = json.loads((root / "frameset.json").read_text())
     manifest["provenance"]["definition"] = "0123456789abcdef"
     (root / "frameset.json").write_text(json.dumps(manifest))
-    with pytest.raises(HouseError, match=r"definition 0123456789abcdef; this install \(generator 9\) stages "
+    with pytest.raises(HouseError, match=r"definition 0123456789abcdef; this install \(generator 10\) stages "
                                          r"definition [0-9a-f]{16}: its houses would differ"):
         SynthHouses(FrameSet.load(root), tmp_path / "views")
+
+
+def test_a_house_s_definition_reads_every_module_that_makes_it_and_not_the_view_cache():
+    """Every module of ``synth`` is in the definition but ``walkups`` (which keeps views, not houses): a new module
+    must be added to it, or named here as one that makes no house."""
+    from pin_match.data.synth.size import DEFINITION_READS
+
+    package = Path(__file__).resolve().parents[1] / "pin_match"
+    synth = {p.relative_to(package).as_posix() for p in (package / "data" / "synth").glob("*.py")}
+    assert synth - set(DEFINITION_READS) == {"data/synth/walkups.py"}
+    assert all((package / read).is_file() for read in DEFINITION_READS)

@@ -37,7 +37,7 @@ def synth(tmp_path_factory):
 @pytest.fixture(scope="module")
 def approach(tmp_path_factory):
     """The walk that heads for its target (``--walk approach``), in the same houses."""
-    return generate(tmp_path_factory.mktemp("synth") / "approach", replace(SMALL, walk="approach"), workers=2)
+    return generate(tmp_path_factory.mktemp("synth") / "approach", replace(SMALL, walk="seek"), workers=2)
 
 
 @pytest.fixture(scope="module")

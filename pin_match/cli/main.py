@@ -107,10 +107,10 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                                                           f"each split (default {default.objects_per_family})")
     s.add_argument("--frames-per-episode", type=int, help="camera frames per episode: the tour's step budget (it ends "
                                                           "when it has seen every piece of furniture), or about the "
-                                                          "approach walk's length, longer where its "
-                                                          f"approach needs it (default {default.frames_per_episode})")
+                                                          "seeking walk's length, longer where its run at "
+                                                          f"the target needs it (default {default.frames_per_episode})")
     s.add_argument("--walk", choices=WALKS, help="'explore' (default): one exploration per house that does not know "
-                                                 "the target, every episode of the house reads it; 'approach': each "
+                                                 "the target, every episode of the house reads it; 'seek': each "
                                                  "episode's walk heads for its target and stops beside it (it knows "
                                                  "the answer: first-match studies only)")
     s.add_argument("--scans", type=Path, help="a scan folder from `pin-match data prepare gso` (default: the scans "

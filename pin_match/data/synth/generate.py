@@ -28,18 +28,17 @@ from pin_match.data.synth.render import reference_views
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
 from pin_match.data.synth.scene import Room
 from pin_match.data.synth.sensor import develop_view, reference_camera
-from pin_match.data.synth.size import DEFAULT_SIZE, GENERATOR, WALKS, SynthSize
+from pin_match.data.synth.size import DEFAULT_SIZE, DEFINITION_READS, GENERATOR, WALKS, SynthSize
 from pin_match.data.synth.tour import exploration_walk
 from pin_match.data.synth.walk import Pose, camera_walk, floor_map
 from pin_match.data.writer import FrameRecord, FrameSetWriter, ObjectOrigin, encode_frame
 
 GENERATOR_VERSION = 10  # 8: approach views of every annotated object after the walk; 9: tours of the whole house,
 # no approach views (the closed loop renders each walk-up on demand: ``walkups``); 10: geodesic lengths on the
-# floor map (``FloorMap.geodesic``), the camera's constants from ``data.agent``
+# floor map (``FloorMap.geodesic``), the camera's constants from ``data.agent``, the walk that seeks the target named
+# ``seek``
 TARGETS_PER_HOUSE = 3  # episodes per house: one render of the exploration walk serves each
 SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
-DEFINITION_READS = ("data/agent.py", "data/compose.py", "data/geometry.py", "data/synth/*.py")  # the code a house is
-# made by, under the package: with the scans, what ``definition`` hashes
 
 
 PlannedHouse = tuple[str, str, list[ObjectSpec], list[tuple[str, int]]]  # house id, split, objects, (episode, target)

@@ -19,8 +19,15 @@ class SynthSize:
     objects_per_family: int = 5
     frames_per_episode: int = MAX_STEPS  # the tour's step budget: PIN's episode limit (it ends sooner, when done)
     splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
-    walk: str = "explore"  # "explore": blind to the target, one per house; "approach": heads for the target
+    walk: str = "explore"  # "explore": blind to the target, one per house; "seek": heads for the target
 
+
+DEFINITION_READS = ("data/agent.py", "data/compose.py", "data/geometry.py", "data/synth/__init__.py",
+                    "data/synth/clutter.py", "data/synth/generate.py", "data/synth/house.py", "data/synth/objects.py",
+                    "data/synth/placing.py", "data/synth/render.py", "data/synth/scans.py", "data/synth/scene.py",
+                    "data/synth/sensor.py", "data/synth/shapes.py", "data/synth/size.py", "data/synth/textures.py",
+                    "data/synth/tour.py", "data/synth/walk.py")  # the code a house is made by, under the package:
+# with the scans, what ``generate.definition`` hashes; every module of ``synth`` but ``walkups``, which keeps views
 
 GENERATOR = "pin_match.data.synth"  # the provenance's ``generator`` of a set this package's generator wrote
 
@@ -30,7 +37,7 @@ def made_by_generator(manifest: dict) -> bool:
     return (manifest.get("provenance") or {}).get("generator") == GENERATOR
 
 
-WALKS = ("explore", "approach")  # an exploration blind to the target, one a house; a walk that heads for it
+WALKS = ("explore", "seek")  # an exploration blind to the target, one a house; a walk that seeks the target out
 DEFAULT_SIZE = SynthSize()  # the embedded default set
 # named sizes: ``pin-match synth --preset NAME``. "bench": 100 val episodes, so SR, SPL and CE rank matchers with
 # intervals of about +-10 points (15 episodes move SR in steps of 6.7 points, its interval spanning about +-25)

@@ -5,21 +5,21 @@ and the helpers every walk shares.
 The default walk, the exploration that does not know the target, is a tour of the whole house
 (``tour.exploration_walk``): every episode of a house reads that one walk.
 
-The walk that heads for the target, ``camera_walk`` (``--walk approach``), is a successful agent's
+The walk that heads for the target, ``camera_walk`` (``--walk seek``), is a successful agent's
 walk: the target is seen far, then near, and the episode ends within about 1 m of it, facing it,
 after a pass by a same-category look-alike. It knows the answer, so it serves first-match studies:
 
 1. a look-around on the spot;
-2. exploration: random places, until the frames the approaches need are all that is left
+2. exploration: random places, until the frames the two runs at an object need are all that is left
    of the episode (most of these frames show nothing relevant, as in a real exploration);
-3. a pass by a same-category look-alike: a straight approach to it, facing it, drawn as the
+3. a pass by a same-category look-alike: a straight run at it, facing it, drawn as the
    target's (the same run to the same kind of stop spot, without the stop);
-4. the approach: from 1-1.75 m further out, straight at the target, one frame per step,
+4. the run at the target: from 1-1.75 m further out, straight at the target, one frame per step,
    to a stop distance at which the target fills a few thousand pixels (at most 1 m), then
    the stop: the camera tilts down or up in two steps to centre the target (as an agent's
    look-down action) and the episode ends there.
 
-The camera has no pitch except in the approaches (steps 3 and 4), where an object below
+The camera has no pitch except in the runs (steps 3 and 4), where an object below
 the field of view is brought into it by tilting, as a robot's head would.
 """
 
@@ -48,12 +48,12 @@ MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal 
 SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
 RUN = (1.0, 1.75)  # the straight run at an object starts this far (metres) behind its stop: the target and a
 # look-alike passed on the way alike, so neither is met larger by construction
-APPROACH_FRAMES = 40  # about what the two approaches take, walking there included; exploration gets the rest
+RUN_FRAMES = 40  # about what the two runs at an object take, walking there included; exploration gets the rest
 
 
 @dataclass(frozen=True)
 class Goal:
-    """An object worth approaching: its centre (metres) and the area it shows seen from the side (m^2)."""
+    """An object a walk runs at: its centre (metres) and the area it shows seen from the side (m^2)."""
 
     x: float
     y: float
@@ -187,11 +187,11 @@ Sight = Callable[[Goal, Pose], float]  # how many pixels of the object a pose sh
 def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], target: Goal,
                 lookalikes: list[Goal], n_frames: int, rng: np.random.Generator, sight: Sight | None = None,
                 ) -> list[Pose]:
-    """The walk that heads for the target (``--walk approach``): explore, pass one look-alike, approach ``target``
+    """The walk that heads for the target (``--walk seek``): explore, pass one look-alike, run at ``target``
     and stop beside it. It knows the answer, so it serves first-match studies only.
 
-    About ``n_frames`` poses: exploration takes what the approaches leave of it (at least a
-    look-around), and the approaches always run to the end, so a short ``n_frames`` gives a
+    About ``n_frames`` poses: exploration takes what the runs leave of it (at least a
+    look-around), and the runs always go to the end, so a short ``n_frames`` gives a
     longer episode rather than one that never nears its target. ``sight`` lets the walk choose,
     among stop spots at about the right distance, the one from which the object shows most (a
     shelf's side panel or a sofa back hides what a floor plan cannot tell); without it the
@@ -202,10 +202,10 @@ def camera_walk(room: Room, obstacles: list[tuple[float, float, float, float]], 
     start, reachable = _start(grid, rng, [(target.x, target.y)])
     walk = _Walk(grid, near, reachable, rng, grid.centre(start), float(rng.uniform(-np.pi, np.pi)), sight)
     walk.look_around(int(rng.integers(3, 7)))
-    walk.explore(n_frames - APPROACH_FRAMES)
+    walk.explore(n_frames - RUN_FRAMES)
     if lookalikes:
-        walk.approach(lookalikes[int(rng.integers(len(lookalikes)))], RUN, stop=False)
-    walk.approach(target, RUN, stop=True)
+        walk.run_at(lookalikes[int(rng.integers(len(lookalikes)))], RUN, stop=False)
+    walk.run_at(target, RUN, stop=True)
     return walk.poses
 
 
@@ -308,10 +308,10 @@ class _Walk:
             if len(self.poses) < budget:
                 self.turn_to(float(self.rng.uniform(-np.pi, np.pi)))
 
-    def approach(self, look: Goal, run: tuple[float, float], stop: bool) -> None:
+    def run_at(self, look: Goal, run: tuple[float, float], stop: bool) -> None:
         """Walk to a spot ``run`` metres further out than the stop, then straight at ``look``, facing it each step."""
         final = self._stop_spot(look)
-        first = self._approach_start(look, final, run)
+        first = self._run_start(look, final, run)
         if not self.near.line_free(first, final):
             final = first
         self.go_to(self.grid.cell(first))
@@ -358,7 +358,7 @@ class _Walk:
         yaw = float(np.arctan2(look.y - at[1], look.x - at[0]))
         return float(at[0]), float(at[1]), yaw, _pitch_for(at, look, centre=True)
 
-    def _approach_start(self, look: Goal, final: np.ndarray, run: tuple[float, float]) -> np.ndarray:
+    def _run_start(self, look: Goal, final: np.ndarray, run: tuple[float, float]) -> np.ndarray:
         """A reachable spot ``run`` metres behind ``final`` (seen from the object), with a straight free line to it."""
         centres = (self.reachable + 0.5) * CELL
         away = final - np.array([look.x, look.y])

@@ -31,7 +31,7 @@ from pin_match import atomic, outputs
 from pin_match.contract.registry import create_matcher, get_matcher_class
 from pin_match.data.digest import DigestError, files_digest
 from pin_match.data.frameset import MANIFEST, FrameSet
-from pin_match.data.synth.size import SynthSize
+from pin_match.data.synth.size import DEFINITION_READS, SynthSize
 from pin_match.errors import PinMatchError
 from pin_match.evaluation.core.evaluator import EvalContext
 from pin_match.evaluation.core.layout import BenchLayout
@@ -114,8 +114,7 @@ SCANNED = DemoSet("scanned look-alikes", "",
                   "in houses of three rooms, rendered along one exploration walk per house that does not know the "
                   "target (AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
                   "scanned.json",
-                  ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", "data/synth/*.py",
-                   "data/compose.py", "data/agent.py"))
+                  ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", *DEFINITION_READS))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",
                      "real photos: val instances of CORe50 objects pasted along walks through real rooms that meet "
                      "each object once, in an order drawn without knowing the target, real look-alikes of its "
