@@ -83,6 +83,11 @@ class FrameRecord:
     visibility: list[dict]
 
 
+def millimetres(depth: np.ndarray) -> np.ndarray:
+    """Depth in metres as a frame-set stores it: whole millimetres, uint16 (0 where nothing was hit, at most 65.5 m)."""
+    return np.clip(np.round(np.nan_to_num(depth) * 1000.0), 0, 65535).astype(np.uint16)
+
+
 def check_id(kind: str, value: str) -> None:
     """Refuse an id that is not one plain folder name: object and episode ids name folders of the frame-set, so a
     '/' would nest folders the loader never finds and '..' would write outside it."""
@@ -134,7 +139,7 @@ def encode_frame(root: str | Path, episode_id: str, step: int, frame: Frame,
         if (np.nan_to_num(depth) < 0).any():
             raise GeometryError(f"frame {frame_id}: depth holds negative values (min {np.nanmin(depth):g} m); "
                                 "depth is metres along the view axis, 0 where nothing was hit")
-        depth_mm = np.clip(np.round(np.nan_to_num(depth) * 1000.0), 0, 65535).astype(np.uint16)
+        depth_mm = millimetres(depth)
         row["depth"] = f"depth/{episode_id}/{step:04d}.png"
         atomic.write_image(root / row["depth"], depth_mm)
     return FrameRecord(row, visibility_rows(frame_id, mask16, frame.legend, depth_mm))

@@ -28,7 +28,7 @@ from pin_match.data.synth.objects import SynthError
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
 from pin_match.data.synth.size import GENERATOR, SynthSize, made_by_generator
 from pin_match.data.walkup import Pose, pose_key
-from pin_match.data.writer import Frame, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame
+from pin_match.data.writer import Frame, FrameSetWriter, ImageFile, ObjectOrigin, encode_frame, millimetres
 
 
 class HouseError(SynthError):
@@ -77,7 +77,7 @@ class SynthHouses:
                     self._world = HouseWorld.build(self.plans[house_id])
                 frame, stored = self._world.shot(pose, ("walk-up", key))
                 atomic.write_bytes(folder / f"{key}.jpg", stored.data)  # type: ignore[arg-type]  # a shot's JPEG
-                buffer = _npz(mask=frame.mask.astype(np.uint16), depth=frame.depth.astype(np.float32))
+                buffer = _npz(mask=frame.mask.astype(np.uint16), depth_mm=millimetres(frame.depth))
                 atomic.write_bytes(folder / f"{key}.npz", buffer)
             out[key] = _read(folder, key)
         return out
@@ -95,7 +95,7 @@ def _read(folder: Path, key: str) -> tuple[Frame, ImageFile]:
     data = (folder / f"{key}.jpg").read_bytes()
     image = cv2.cvtColor(cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_COLOR), cv2.COLOR_BGR2RGB)
     with np.load(folder / f"{key}.npz") as stored:
-        return Frame(image, stored["mask"], {}, stored["depth"]), ImageFile(".jpg", data)
+        return Frame(image, stored["mask"], {}, stored["depth_mm"].astype(np.float32) / 1000.0), ImageFile(".jpg", data)
 
 
 def request_name(fs: FrameSet, requests: Mapping[str, Sequence[Pose]]) -> str:
