@@ -78,7 +78,7 @@ class StopPolicy:
 
     def __init_subclass__(cls, **kwargs) -> None:
         super().__init_subclass__(**kwargs)
-        if cls.PREFIX:
+        if cls.__dict__.get("PREFIX"):  # a kind of its own, not a subclass of one
             _KINDS[cls.PREFIX] = cls
 
     def __post_init__(self) -> None:
