@@ -53,8 +53,9 @@ def test_the_tour_stands_at_every_viewpoint_and_ends_when_done(seed):
 @pytest.mark.parametrize("seed", range(4))
 def test_every_piece_and_every_rug_is_looked_at_close(seed):
     """Every point of every piece of furniture and every rug, where an object's middle would stand, is in the view of
-    some pose (its tilt included) within 2.25 m, and nine in ten within ``COVER``; the floor along the walls, where
-    only large objects stand, within ``FLOOR_COVER`` for most of it."""
+    some pose (its tilt included) within 2 m, and nine in ten within ``COVER``; the floor along the walls, where
+    only large objects stand, within ``FLOOR_COVER``. The bars sit outside the spread over seeds 0-7: the farthest
+    point 1.67-1.94 m, the share within ``COVER`` 0.950-0.990, the floor's 1.000 at every seed."""
     house = _house(seed)
     walk = tour.exploration_walk(house, list(house.footprints), [], LIMIT, np.random.default_rng(seed))
     furniture = np.concatenate([p.points for p in tour._pieces(house) if p.kind != "floor"])
@@ -63,8 +64,8 @@ def test_every_piece_and_every_rug_is_looked_at_close(seed):
     assert len(rugs) == ROOMS and all(((furniture[:, 0] >= s.x0) & (furniture[:, 0] <= s.x1) & (furniture[:, 1] >= s.y0)
                                        & (furniture[:, 1] <= s.y1) & (furniture[:, 2] < 0.2)).any() for s in rugs)
     near = _framed(walk, furniture)
-    assert near.max() <= 2.25 and (near <= tour.COVER).mean() >= 0.9, np.sort(near)[-5:]
-    assert (_framed(walk, floor) <= tour.FLOOR_COVER).mean() >= 0.7
+    assert near.max() <= 2.0 and (near <= tour.COVER).mean() >= 0.94, np.sort(near)[-5:]
+    assert (_framed(walk, floor) <= tour.FLOOR_COVER).mean() >= 0.99
 
 
 @pytest.mark.parametrize("seed", range(4))

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from pin_match.data.paths import GridWalks
 from pin_match.errors import PinMatchError
 
 GEOMETRY_VERSION = 1  # the floor map is optional: a reader of version 1 that ignores it reads the rest unchanged
@@ -133,7 +134,7 @@ class FloorMap:
         around walls and furniture, never through them."""
         centres = self.centres
         a, b = self._nearest_cell(a_xy), self._nearest_cell(b_xy)
-        walked = self._walks_from(a)[0][b]
+        walked = self.walks.from_node(a)[0][b]
         ends = float(np.hypot(*(centres[a] - np.asarray(a_xy)[:2])) + np.hypot(*(centres[b] - np.asarray(b_xy)[:2])))
         return float(walked + ends) if np.isfinite(walked) else float(np.hypot(*(np.asarray(b_xy)[:2] -
                                                                                    np.asarray(a_xy)[:2])))
@@ -147,53 +148,20 @@ class FloorMap:
     def path(self, a_xy: Sequence[float], b_xy: Sequence[float]) -> np.ndarray:
         """The shortest walk of ``walk_length`` as waypoints (K, 2), from ``a_xy`` through the standable cells'
         centres to ``b_xy``; the straight line where no walk joins them."""
-        a, b = self._nearest_cell(a_xy), self._nearest_cell(b_xy)
+        cells = self.walks.path(self._nearest_cell(a_xy), self._nearest_cell(b_xy))
         ends = np.asarray(a_xy, np.float64)[:2], np.asarray(b_xy, np.float64)[:2]
-        lengths, parents = self._walks_from(a)
-        if not np.isfinite(lengths[b]):
-            return np.stack(ends)
-        cells = [b]
-        while cells[-1] != a:
-            cells.append(int(parents[cells[-1]]))
-        return np.vstack([ends[0], self.centres[cells[::-1]], ends[1]])
+        return np.vstack([ends[0], self.centres[cells], ends[1]]) if cells else np.stack(ends)
 
     def _nearest_cell(self, xy: Sequence[float]) -> int:
         """The standable cell nearest a point (an index into ``centres``)."""
         return int(np.argmin(np.hypot(*(self.centres - np.asarray(xy, np.float64)[:2]).T)))
 
-    def _walks_from(self, source: int) -> tuple[np.ndarray, np.ndarray]:
-        """Walk lengths from the standable cell ``source`` (an index into ``centres``) to every one, and each cell's
-        predecessor on its shortest walk; cached per source: a sweep of sigmas asks the same few sources again and
-        again."""
-        from scipy.sparse.csgraph import dijkstra
-
-        cache = self.__dict__.setdefault("_walks", {})
-        if source not in cache:
-            cache[source] = dijkstra(self._graph(), indices=source, return_predecessors=True)
-        return cache[source]
-
-    def _graph(self):
-        """The standable cells as a graph: an edge between 8-neighbours, weighted by the distance of their centres."""
-        if "_graph_matrix" not in self.__dict__:
-            from scipy.sparse import coo_matrix
-
-            index = np.full(self.free.shape, -1, np.int64)
-            cells = np.argwhere(self.free)
-            index[cells[:, 0], cells[:, 1]] = np.arange(len(cells))
-            rows, cols, weights = [], [], []
-            for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1)):
-                ni, nj = cells[:, 0] + di, cells[:, 1] + dj
-                inside = (ni >= 0) & (ni < self.free.shape[0]) & (nj >= 0) & (nj < self.free.shape[1])
-                other = np.full(len(cells), -1, np.int64)
-                other[inside] = index[ni[inside], nj[inside]]
-                ok = other >= 0
-                rows.append(np.flatnonzero(ok))
-                cols.append(other[ok])
-                weights.append(np.full(int(ok.sum()), self.cell * (math.sqrt(2.0) if di and dj else 1.0)))
-            r, c, w = np.concatenate(rows), np.concatenate(cols), np.concatenate(weights)
-            self.__dict__["_graph_matrix"] = coo_matrix((np.r_[w, w], (np.r_[r, c], np.r_[c, r])),
-                                                 shape=(len(cells), len(cells))).tocsr()
-        return self.__dict__["_graph_matrix"]
+    @property
+    def walks(self) -> GridWalks:
+        """The map's shortest walks (``paths.GridWalks``), built on first use and kept."""
+        if "_walks" not in self.__dict__:
+            self.__dict__["_walks"] = GridWalks(self.free, self.cell)
+        return self.__dict__["_walks"]
 
     def nearest(self, xyz: Sequence[float], floor: float) -> float:
         """The least distance from an agent standing anywhere on the map (on the floor at height ``floor``) to the

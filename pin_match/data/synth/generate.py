@@ -35,8 +35,9 @@ from pin_match.data.writer import FrameRecord, FrameSetWriter, ObjectOrigin, enc
 
 GENERATOR_VERSION = 10  # 8: approach views of every annotated object after the walk; 9: tours of the whole house,
 # no approach views (the closed loop renders each walk-up on demand: ``walkups``); 10: geodesic lengths on the
-# floor map (``FloorMap.geodesic``), the camera's constants from ``data.agent``, the walk that seeks the target named
-# ``seek``
+# floor map (``FloorMap.geodesic``), every walk on one path engine (``data.paths``: shortest paths where the walker
+# went breadth-first), a tour's headings kept ``TURNED`` inside the view, the camera's constants from ``data.agent``,
+# the walk that seeks the target named ``seek``
 TARGETS_PER_HOUSE = 3  # episodes per house: one render of the exploration walk serves each
 SAME_MAX, PIN_SAME = 3, 2.90  # same-category distractors per PIN val episode: at most 3, 2.90 on average
 

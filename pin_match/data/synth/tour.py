@@ -36,6 +36,7 @@ from pin_match.data.agent import CAMERA_HEIGHT, HALF_HFOV, HALF_VFOV, TILT, TURN
 from pin_match.data.synth.scene import Room, Surface
 from pin_match.data.synth.walk import (
     CELL,
+    TURNED,
     Grid,
     Pose,
     _start,
@@ -58,7 +59,7 @@ LOOK_ABOVE = 0.1  # an object's middle stands about this far above its surface: 
 TILTS = sorted((combo for n in range(1, 5) for combo in combinations((TILT, 0.0, -TILT, -2 * TILT), n)),
                key=lambda combo: (len(combo), sum(map(abs, combo))))  # a heading's tilts: fewest, gentlest first
 EDGE = np.radians(5)  # a point aimed at stays this far inside the frame's top and bottom edges ...
-SIDE = np.radians(3)  # ... and this far inside its sides
+SIDE = TURNED + np.radians(3)  # ... and this far inside its sides, where the heading turned to may be off by TURNED
 SHELF_AHEAD = 0.15  # a shelf is looked into from in front of it only (metres ahead of its front), its side panels and
 # back being solid
 WALL_BAND = 0.5  # metres from a wall where objects that fit no surface stand (``placing.FLOOR_BANDS``' first band)

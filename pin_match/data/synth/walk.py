@@ -1,6 +1,6 @@
 """A PIN agent's camera walks, with PIN's discrete actions (0.25 m forward, turns of at most 30 degrees) along
-breadth-first paths on a 10 cm occupancy grid (never through furniture or walls): the grid, the walker (``_Walk``)
-and the helpers every walk shares.
+shortest paths (``paths.GridWalks``, the engine of every distance) on a 10 cm occupancy grid (never through
+furniture or walls): the grid, the walker (``_Walk``) and the helpers every walk shares.
 
 The default walk, the exploration that does not know the target, is a tour of the whole house
 (``tour.exploration_walk``): every episode of a house reads that one walk.
@@ -25,8 +25,6 @@ the field of view is brought into it by tilting, as a robot's head would.
 
 from __future__ import annotations
 
-import heapq
-from collections import deque
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -34,6 +32,7 @@ import numpy as np
 
 from pin_match.data.agent import CAMERA_HEIGHT, FOCAL_PX, FORWARD_STEP, HALF_VFOV, TURN
 from pin_match.data.geometry import AGENT_RADIUS, FloorMap
+from pin_match.data.paths import GridWalks
 from pin_match.data.synth.scene import Room
 
 CELL = 0.1
@@ -48,6 +47,7 @@ MIN_STAND = 0.25  # ... and the camera never stands over the object (horizontal 
 SECTOR = np.radians(30)  # stop spots are compared one per sector of this angle around the object
 RUN = (1.0, 1.75)  # the straight run at an object starts this far (metres) behind its stop: the target and a
 # look-alike passed on the way alike, so neither is met larger by construction
+TURNED = np.radians(5)  # ``turn_to`` stops turning once the heading is this near the one it turns to
 RUN_FRAMES = 40  # about what the two runs at an object take, walking there included; exploration gets the rest
 
 
@@ -93,6 +93,7 @@ class Grid:
                  clearance: float = CLEARANCE) -> None:
         self.free = standable(room, obstacles, clearance, CELL)
         self.nx, self.ny = self.free.shape
+        self.walks = GridWalks(self.free, CELL)
 
     def centre(self, cell: tuple[int, int]) -> np.ndarray:
         return (np.array(cell) + 0.5) * CELL
@@ -100,54 +101,17 @@ class Grid:
     def cell(self, xy) -> tuple[int, int]:
         return int(np.clip(xy[0] / CELL, 0, self.nx - 1)), int(np.clip(xy[1] / CELL, 0, self.ny - 1))
 
-    def bfs(self, start: tuple[int, int]) -> dict[tuple[int, int], tuple[int, int] | None]:
-        """Parents of every cell reachable from ``start`` (8-connected)."""
-        parent: dict[tuple[int, int], tuple[int, int] | None] = {start: None}
-        queue = deque([start])
-        while queue:
-            c = queue.popleft()
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    n = (c[0] + dx, c[1] + dy)
-                    if n not in parent and 0 <= n[0] < self.nx and 0 <= n[1] < self.ny and self.free[n]:
-                        parent[n] = c
-                        queue.append(n)
-        return parent
-
     def path_lengths(self, start: tuple[int, int]) -> np.ndarray:
         """Shortest 8-connected walk (metres, a diagonal step sqrt(2) cells) from ``start`` to every cell; inf where
-        unreachable (Dijkstra)."""
-        dist = np.full(self.free.shape, np.inf)
-        dist[start] = 0.0
-        return self._relax(dist, [(0.0, start)])
+        unreachable (the one path engine, ``paths.GridWalks``)."""
+        return self.walks.on_grid(self.walks.from_node(int(self.walks.node[start]))[0])
 
     def lengths_to(self, xy: tuple[float, float], reach: float = 1.5) -> np.ndarray:
         """The walk from every cell to a point that may stand off the floor (on furniture): the straight stretch
         from a free cell within ``reach`` of it, then the shortest walk; inf where no such cell is reachable."""
-        cells = np.argwhere(self.free)
-        straight = np.hypot(*((cells + 0.5) * CELL - np.asarray(xy)).T)
-        dist = np.full(self.free.shape, np.inf)
-        queue = []
-        for (i, j), d in zip(cells[straight <= reach], straight[straight <= reach]):
-            dist[i, j] = d
-            queue.append((float(d), (int(i), int(j))))
-        heapq.heapify(queue)
-        return self._relax(dist, queue)
-
-    def _relax(self, dist: np.ndarray, queue: list[tuple[float, tuple[int, int]]]) -> np.ndarray:
-        while queue:
-            d, c = heapq.heappop(queue)
-            if d > dist[c]:
-                continue
-            for dx in (-1, 0, 1):
-                for dy in (-1, 0, 1):
-                    n = (c[0] + dx, c[1] + dy)
-                    if (dx or dy) and 0 <= n[0] < self.nx and 0 <= n[1] < self.ny and self.free[n]:
-                        step = d + CELL * (1.4142135623730951 if dx and dy else 1.0)
-                        if step < dist[n]:
-                            dist[n] = step
-                            heapq.heappush(queue, (step, n))
-        return dist
+        straight = np.hypot(*((self.walks.cells + 0.5) * CELL - np.asarray(xy)).T)
+        near = np.flatnonzero(straight <= reach)
+        return self.walks.on_grid(self.walks.from_nodes(near, straight[near]))
 
     def line_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         n = int(np.ceil(np.linalg.norm(b - a) / (CELL / 2))) + 1
@@ -155,17 +119,15 @@ class Grid:
 
 
 def _path(grid: Grid, start: tuple[int, int], goal: tuple[int, int]) -> list[np.ndarray]:
-    """Waypoints from start to goal: the BFS path with corners cut where the straight line is free.
+    """Waypoints from start to goal: the shortest walk on the grid with corners cut where the straight line is free.
 
-    A goal the walker cannot reach from ``start`` gives no path (the walker stays).
+    A goal the walker cannot reach from ``start`` (or a cell that is not free) gives no path (the walker stays).
     """
-    parent = grid.bfs(start)
-    if goal not in parent:
+    source, target = int(grid.walks.node[start]), int(grid.walks.node[goal])
+    cells = grid.walks.path(source, target) if source >= 0 and target >= 0 else []
+    if not cells:
         return [grid.centre(start)]
-    cells = [goal]
-    while parent[cells[-1]] is not None:
-        cells.append(parent[cells[-1]])  # type: ignore[arg-type]
-    points = [grid.centre(c) for c in reversed(cells)]
+    points = [grid.centre(tuple(grid.walks.cells[c])) for c in cells]
     out = [points[0]]
     k = 0
     while k < len(points) - 1:
@@ -244,7 +206,7 @@ def _main_floor(grid: Grid) -> np.ndarray:
     left = {(int(i), int(j)) for i, j in np.argwhere(grid.free)}
     best: set[tuple[int, int]] = set()
     while len(left) > len(best):
-        part = set(grid.bfs(min(left)))
+        part = {(int(i), int(j)) for i, j in np.argwhere(np.isfinite(grid.path_lengths(min(left))))}
         best = max(best, part, key=len)
         left -= part
     return np.array(sorted(best))
@@ -278,7 +240,7 @@ class _Walk:
             self.emit()
 
     def turn_to(self, goal_yaw: float) -> None:
-        while abs(_wrap(goal_yaw - self.yaw)) > np.radians(5):
+        while abs(_wrap(goal_yaw - self.yaw)) > TURNED:
             self.yaw = _wrap(self.yaw + float(np.clip(_wrap(goal_yaw - self.yaw), -TURN, TURN)))
             self.emit()
 
