@@ -194,8 +194,8 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
         parts += [html.heading("Paired comparison", 3),
                   *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]
     parts += [html.heading("Each matcher's first match", 3),
-              html.paragraph(f"{shown} of {n_val} val episodes, those where a matcher's first match was a "
-                             "look-alike first: the target's references, then where each matcher first fired "
+              html.paragraph(f"{shown} of {n_val} val episodes (those where a matcher's first match was a "
+                             "look-alike come first): the target's references, then where each matcher first fired "
                              "(green border: the target; red: anything else, or nothing).", "note"),
               *episode_pictures(s, assets, firsts),
               html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
