@@ -424,9 +424,9 @@ def test_every_approach_stops_with_its_target_large_and_passes_a_lookalike(appro
 
 @pytest.mark.slow
 def test_default_set_explores_houses_as_far_as_pins_episodes(default_synth):
-    """Generator 9's default set (seed 0), measured (docs/synthetic.md, "What an episode is"; `python -m
-    benchmarks.walk_stats`): a start-to-target geodesic median of 6.2 m over its 30 episodes in 10 houses (val alone
-    4.5 m; PIN's example 8.24 m), the start in another room than the target in 25 of 30; its tours of the whole
+    """Generator 10's default set (seed 0), measured (docs/synthetic.md, "What an episode is"; `python -m
+    benchmarks.walk_stats`): a start-to-target geodesic median of 7.2 m over its 30 episodes in 10 houses (val alone
+    6.9 m; PIN's example 8.24 m), the start in another room than the target in 25 of 30; its tours of the whole
     house enter every room of every house and show all 30 targets, 25 of them at 2,000 px or more. The bars sit
     under those figures: a change that shortened the episodes or hid the targets from the tour would fall below
     them."""
