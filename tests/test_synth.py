@@ -427,9 +427,10 @@ def test_default_set_explores_houses_as_far_as_pins_episodes(default_synth):
     """Generator 10's default set (seed 0), measured (docs/synthetic.md, "What an episode is"; `python -m
     benchmarks.walk_stats`): a start-to-target geodesic median of 7.2 m over its 30 episodes in 10 houses (val alone
     6.9 m; PIN's example 8.24 m), the start in another room than the target in 25 of 30; its tours of the whole
-    house enter every room of every house and show all 30 targets, 25 of them at 2,000 px or more. The bars sit
-    under those figures: a change that shortened the episodes or hid the targets from the tour would fall below
-    them."""
+    house enter every room of every house and show all 30 targets, 25 of them at 2,000 px or more. The bars are
+    from the spread over the default sets of seeds 0-4 (generator 10): geodesic medians 5.31-7.76 m, the start in
+    another room in 21-25 of 30, every room entered and every target shown at each seed, 23-25 targets at 2,000
+    px; a change that shortened the episodes or hid the targets from the tour would fall below them."""
     from pin_match.data.compose import stable_seed
     from pin_match.data.synth.generate import ROOMS
     from pin_match.data.synth.scene import make_house
@@ -445,7 +446,7 @@ def test_default_set_explores_houses_as_far_as_pins_episodes(default_synth):
         g = fs.geometry.episodes[episode_id]
         rooms = houses[house].room_of(g.start.x, g.start.y), houses[house].room_of(*g.positions[target][:2])
         other_room.append(rooms[0] != rooms[1])
-    assert np.mean(other_room) >= 0.6, other_room
+    assert np.mean(other_room) >= 0.65, other_room
     poses = fs.frames.merge(fs.episodes[["episode_id", "scene_id"]], on="episode_id")
     for house, rows in poses.groupby("scene_id"):
         assert {houses[house].room_of(x, y) for x, y in zip(rows.pose_x, rows.pose_y)} == set(range(ROOMS)), house
