@@ -50,6 +50,19 @@ def test_the_tour_stands_at_every_viewpoint_and_ends_when_done(seed):
     assert walk[:50] == tour.exploration_walk(house, list(house.footprints), [], 50, np.random.default_rng(seed))
 
 
+FARTHEST, WITHIN_COVER, FLOOR_WITHIN = 2.0, 0.94, 0.99  # the bars: metres, shares of points
+
+
+def _looked_at(seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The distance at which the tour of house ``seed`` frames each point of its furniture and rugs, and of its
+    floor along the walls (``_framed``)."""
+    house = _house(seed)
+    walk = tour.exploration_walk(house, list(house.footprints), [], LIMIT, np.random.default_rng(seed))
+    furniture = np.concatenate([p.points for p in tour._pieces(house) if p.kind != "floor"])
+    floor = np.concatenate([p.points for p in tour._pieces(house) if p.kind == "floor"])
+    return _framed(walk, furniture), _framed(walk, floor)
+
+
 @pytest.mark.parametrize("seed", range(4))
 def test_every_piece_and_every_rug_is_looked_at_close(seed):
     """Every point of every piece of furniture and every rug, where an object's middle would stand, is in the view of
@@ -57,15 +70,25 @@ def test_every_piece_and_every_rug_is_looked_at_close(seed):
     only large objects stand, within ``FLOOR_COVER``. The bars sit outside the spread over seeds 0-7: the farthest
     point 1.67-1.94 m, the share within ``COVER`` 0.950-0.990, the floor's 1.000 at every seed."""
     house = _house(seed)
-    walk = tour.exploration_walk(house, list(house.footprints), [], LIMIT, np.random.default_rng(seed))
     furniture = np.concatenate([p.points for p in tour._pieces(house) if p.kind != "floor"])
-    floor = np.concatenate([p.points for p in tour._pieces(house) if p.kind == "floor"])
     rugs = [s for s in house.surfaces if s.facing is None]
     assert len(rugs) == ROOMS and all(((furniture[:, 0] >= s.x0) & (furniture[:, 0] <= s.x1) & (furniture[:, 1] >= s.y0)
                                        & (furniture[:, 1] <= s.y1) & (furniture[:, 2] < 0.2)).any() for s in rugs)
-    near = _framed(walk, furniture)
-    assert near.max() <= 2.0 and (near <= tour.COVER).mean() >= 0.94, np.sort(near)[-5:]
-    assert (_framed(walk, floor) <= tour.FLOOR_COVER).mean() >= 0.99
+    near, floor = _looked_at(seed)
+    assert near.max() <= FARTHEST and (near <= tour.COVER).mean() >= WITHIN_COVER, np.sort(near)[-5:]
+    assert (floor <= tour.FLOOR_COVER).mean() >= FLOOR_WITHIN
+
+
+@pytest.mark.parametrize("broken, value", [("SIDE", np.radians(3)), ("MIN_SHARE", 0.5), ("FLOOR_SHARE", 0.9)])
+def test_a_broken_tour_falls_below_the_bars(monkeypatch, broken, value):
+    """A tour that keeps its points only 3 degrees inside the frame's sides (less than the walker's turn slack), and
+    ones that skip the spots seeing under half of a piece or most of a floor: each leaves some house of seeds 0-3
+    below a bar above."""
+    monkeypatch.setattr(tour, broken, value)
+    looked = [_looked_at(seed) for seed in range(4)]
+    assert any(near.max() > FARTHEST or (near <= tour.COVER).mean() < WITHIN_COVER
+               or (floor <= tour.FLOOR_COVER).mean() < FLOOR_WITHIN for near, floor in looked), \
+        [(near.max(), (near <= tour.COVER).mean(), (floor <= tour.FLOOR_COVER).mean()) for near, floor in looked]
 
 
 @pytest.mark.parametrize("seed", range(4))
