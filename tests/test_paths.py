@@ -39,6 +39,22 @@ def test_a_walk_from_several_starts_takes_each_start_s_offset():
     assert apart.path(0, 1) == [] and apart.from_node(0)[0][1] == np.inf
 
 
+def test_parts_join_diagonal_neighbours_and_the_largest_is_the_first_of_equals():
+    """A 4 x 4 grid: cells (0, 0) and (1, 1) touch at a corner (one part), (3, 0) stands alone, and (0, 3), (1, 3)
+    and (3, 3) make a part of two and a part of one. The largest parts tie at two cells: the first, by its first
+    cell, is the largest; a third cell on the later one makes that one the largest."""
+    free = np.zeros((4, 4), bool)
+    free[[0, 1, 3, 0, 1, 3], [0, 1, 0, 3, 3, 3]] = True
+    walks = GridWalks(free, 1.0)
+    parts = {tuple(int(v) for v in c): int(p) for c, p in zip(walks.cells, walks.parts())}
+    assert parts[0, 0] == parts[1, 1] and parts[0, 3] == parts[1, 3]
+    assert len({parts[0, 0], parts[0, 3], parts[3, 0], parts[3, 3]}) == 4
+    assert [tuple(int(v) for v in walks.cells[c]) for c in walks.largest_part()] == [(0, 0), (1, 1)]
+    free[2, 3] = True
+    assert [tuple(int(v) for v in c) for c in GridWalks(free, 1.0).cells[GridWalks(free, 1.0).largest_part()]] \
+        == [(0, 3), (1, 3), (2, 3), (3, 3)]
+
+
 def test_the_floor_map_and_the_generator_s_grid_walk_on_one_engine():
     """SPL's geodesic (the floor map) and the tour's distances (``synth.walk.Grid``) come from the same graph."""
     from pin_match.data.synth.scene import make_house

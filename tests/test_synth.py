@@ -490,6 +490,17 @@ def test_a_broken_generator_falls_below_the_default_set_s_bars(monkeypatch, tmp_
     assert missed <= set(misses), misses
 
 
+def test_a_renderer_leaves_no_folder_behind():
+    """The renderer's folder for textures (pybullet reads them from files) goes when its process ends."""
+    import subprocess
+    import sys
+
+    code = "from pin_match.data.synth.render import Renderer; r = Renderer(); print('folder', r._tmp)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    folder = Path(next(line for line in out.splitlines() if line.startswith("folder ")).split(" ", 1)[1])
+    assert folder.name.startswith("pin_match_synth_") and not folder.exists()
+
+
 def test_refuses_existing_output(synth):
     from pin_match.data.frameset import FrameSetError
 

@@ -13,7 +13,7 @@ from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, HALF_HFOV, HALF_VF
 from pin_match.data.synth import tour
 from pin_match.data.synth.placing import place_objects
 from pin_match.data.synth.scene import Room, Surface, make_house
-from pin_match.data.synth.walk import Grid, _main_floor
+from pin_match.data.synth.walk import Grid
 
 ROOMS = 3
 LIMIT = 1000  # PIN's episode limit: the budget the generator passes
@@ -40,7 +40,7 @@ def test_the_tour_stands_at_every_viewpoint_and_ends_when_done(seed):
     PIN's 1,000 steps, the same with a larger budget (it is done, not cut off)."""
     house = _house(seed)
     grid = Grid(house, list(house.footprints))
-    views = tour._viewpoints(house, grid, {tuple(int(v) for v in c) for c in _main_floor(grid)})
+    views = tour._viewpoints(house, grid, {tuple(int(v) for v in c) for c in grid.main_floor()})
     walk = tour.exploration_walk(house, list(house.footprints), [], LIMIT, np.random.default_rng(seed))
     stood = np.array([pose[:2] for pose in walk])
     assert all(np.hypot(*(stood - grid.centre(view.cell)).T).min() <= 0.05 + 1e-9 for view in views)  # go_to's stop
@@ -154,7 +154,7 @@ def test_a_piece_with_its_front_blocked_is_seen_from_its_side_and_one_boxed_in_i
     assert (_framed(walk, points) <= 2.0).all()
     room = _one_table(8.0, [(0.0, 0.0, 4.8, 2.0), (0.0, 2.0, 1.9, 5.0), (3.1, 2.0, 4.8, 5.0), (1.9, 2.8, 3.1, 5.0)])
     grid = Grid(room, room.footprints)  # free floor only 2 m and more from the table
-    views = tour._viewpoints(room, grid, {tuple(int(v) for v in c) for c in _main_floor(grid)})
+    views = tour._viewpoints(room, grid, {tuple(int(v) for v in c) for c in grid.main_floor()})
     assert views and all(grid.centre(v.cell)[0] > 4.8 for v in views)  # the floor's only
     assert len(tour.exploration_walk(room, room.footprints, [], LIMIT, np.random.default_rng(0))) < LIMIT
 

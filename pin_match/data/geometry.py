@@ -107,20 +107,11 @@ class FloorMap:
         """(K, 2) centres of the standable cells."""
         return (np.argwhere(self.free) + 0.5) * self.cell + np.asarray(self.origin)
 
-    def _components(self) -> np.ndarray:
-        """Each standable cell's connected part of the floor (8-connected), in ``centres``' order."""
-        if "_labels" not in self.__dict__:
-            import cv2
-
-            labels = cv2.connectedComponents(self.free.astype(np.uint8), connectivity=8)[1]
-            self.__dict__["_labels"] = labels[self.free]
-        return self.__dict__["_labels"]
-
     def stand(self, goal_xy: np.ndarray, eye_xy: np.ndarray) -> np.ndarray:
         """Where an agent at ``eye_xy`` that walks to ``goal_xy`` stops: the standable cell nearest the goal among
         those it can walk to (the part of the floor holding the standable cell nearest it), the nearer to it
         first among equals."""
-        centres, parts = self.centres, self._components()
+        centres, parts = self.centres, self.walks.parts()
         from_eye = np.hypot(*(centres - np.asarray(eye_xy)[:2]).T)
         reach = parts == parts[int(np.argmin(from_eye))]
         to_goal = np.hypot(*(centres[reach] - np.asarray(goal_xy)[:2]).T)

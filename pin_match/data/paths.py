@@ -41,6 +41,20 @@ class GridWalks:
         self.graph = coo_matrix((np.r_[w, w], (np.r_[r, c], np.r_[c, r])),
                                 shape=(len(self.cells), len(self.cells))).tocsr()
         self._from: dict[int, tuple[np.ndarray, np.ndarray]] = {}
+        self._parts: np.ndarray | None = None
+
+    def parts(self) -> np.ndarray:
+        """Each cell's connected part of the floor, numbered in the order of each part's first cell."""
+        if self._parts is None:
+            from scipy.sparse.csgraph import connected_components
+
+            self._parts = connected_components(self.graph, directed=False)[1]
+        return self._parts
+
+    def largest_part(self) -> np.ndarray:
+        """The cells (numbers, ascending) of the largest connected part: the first of equals."""
+        parts = self.parts()
+        return np.flatnonzero(parts == np.bincount(parts).argmax())
 
     def from_node(self, source: int) -> tuple[np.ndarray, np.ndarray]:
         """Walk lengths (metres) from the cell numbered ``source`` to every cell (inf where none joins them), and

@@ -49,7 +49,8 @@ class Renderer:
 
     def __init__(self) -> None:
         self.client = p.connect(p.DIRECT)
-        self._tmp = tempfile.mkdtemp(prefix="pin_match_synth_")
+        self._folder = tempfile.TemporaryDirectory(prefix="pin_match_synth_")  # removed when the process ends
+        self._tmp = self._folder.name
         self._textures = 0
 
     def reset(self) -> None:

@@ -113,6 +113,10 @@ class Grid:
         near = np.flatnonzero(straight <= reach)
         return self.walks.on_grid(self.walks.from_nodes(near, straight[near]))
 
+    def main_floor(self) -> np.ndarray:
+        """The cells (i, j) of the largest connected part of the free floor, sorted."""
+        return self.walks.cells[self.walks.largest_part()]
+
     def line_free(self, a: np.ndarray, b: np.ndarray) -> bool:
         n = int(np.ceil(np.linalg.norm(b - a) / (CELL / 2))) + 1
         return all(self.free[self.cell(a + (b - a) * t)] for t in np.linspace(0, 1, n))
@@ -184,7 +188,7 @@ def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, 
     """
     if not grid.free.any():
         raise ValueError("room has no free floor for the camera")
-    cells = main = _main_floor(grid)
+    cells = main = grid.main_floor()
     if within is not None:
         x0, y0, x1, y1 = within
         centres = (cells + 0.5) * CELL
@@ -199,17 +203,6 @@ def _start(grid: Grid, rng: np.random.Generator, targets: Sequence[tuple[float, 
     weights = away[far] / away[far].sum() if len(far) and weighted else None
     k = int(rng.choice(far, p=weights)) if len(far) else int(np.argmax(away))
     return (int(cells[k][0]), int(cells[k][1])), main
-
-
-def _main_floor(grid: Grid) -> np.ndarray:
-    """The cells of the largest connected part of the grid's free floor, sorted."""
-    left = {(int(i), int(j)) for i, j in np.argwhere(grid.free)}
-    best: set[tuple[int, int]] = set()
-    while len(left) > len(best):
-        part = {(int(i), int(j)) for i, j in np.argwhere(np.isfinite(grid.path_lengths(min(left))))}
-        best = max(best, part, key=len)
-        left -= part
-    return np.array(sorted(best))
 
 
 def _pitch_for(eye: np.ndarray, look: Goal, centre: bool) -> float:
