@@ -4,7 +4,7 @@ Measured on the default frame-set of ``pin-match synth``: real scanned products 
 Objects) in look-alike families, rendered along PIN walks (exact ground truth, same bytes for the
 seed), by mean score per frame class: frames showing the target; frames showing a look-alike of
 its family but not the target; frames showing no annotated object at all. SIFT needs ``min_inliers``
-verified matches, which the renders rarely give (at least 5 target frames, at most 1 % of the frames
+verified matches, which the renders rarely give (at least 5 target frames, at most 0.1 % of the frames
 showing nothing annotated), so for it look-alike and nothing may tie near 0. The real-photo tests check SIFT's floor
 and colour's saturation (issue 14.10, 14.11).
 """
@@ -20,24 +20,49 @@ from pin_match import Target, create_matcher
 from pin_match.evaluation.core.labels import frame_labels, scored_frames
 from pin_match.scoring import RunOptions, score
 
+# sift's share of frames showing nothing annotated that it verifies: generator 10's default sets of seeds 0-4 gave
+# 0-2 of 7,935-8,877 (0.023 % at most: seed 0's 2, at 6 inliers), generator 7's 1 of 1,797 (a colour double wearing
+# its object's own print); and 30-32 target frames at 5 inliers or more
+NOTHING_VERIFIED = 0.001
+
+
+def _frame_classes(fs, table):
+    """The scores and the frames showing the target; a look-alike of its family but not the target; nothing
+    annotated at all."""
+    scored = scored_frames(frame_labels(fs), table)
+    target = scored.target_visible
+    return scored.score, target, ~target & scored.same_visible, ~target & ~scored.same_visible & ~scored.other_visible
+
 
 @pytest.mark.parametrize("name", ["sift", "color"])
 def test_scores_rank_target_above_lookalikes_above_nothing(name, default_synth, tmp_path):
-    table = score(default_synth, name, out=tmp_path, run=RunOptions(progress=False))
-    scored = scored_frames(frame_labels(default_synth), table)
-    target = scored.target_visible
-    lookalike = ~target & scored.same_visible
-    nothing = ~target & ~scored.same_visible & ~scored.other_visible
+    score_of, target, lookalike, nothing = _frame_classes(
+        default_synth, score(default_synth, name, out=tmp_path, run=RunOptions(progress=False)))
     assert min(target.sum(), lookalike.sum(), nothing.sum()) >= 50
-    means = [scored.score[m].mean() for m in (target, lookalike, nothing)]
+    means = [score_of[m].mean() for m in (target, lookalike, nothing)]
     message = f"{name}: target {means[0]:.3f}, look-alike {means[1]:.3f}, nothing {means[2]:.3f}"
     if name == "color":
         assert means[0] > means[1] > means[2], message
-    else:  # sift verifies a model only with min_inliers: rarely on these renders, almost never by chance
+    else:  # sift verifies a model only with min_inliers: rarely on these renders, never by chance
         assert means[0] > max(means[1], means[2]), message
-        # generator 7 measured 1 of 1,797 frames showing no annotated object at 5 inliers (a colour double wears
-        # patches of its object's own print) and 5 target frames at 5 or more
-        assert (scored.score[nothing] > 0).mean() <= 0.01 and (scored.score[target] >= 5).sum() >= 5
+        assert (score_of[nothing] > 0).mean() <= NOTHING_VERIFIED and (score_of[target] >= 5).sum() >= 5
+
+
+@pytest.mark.slow
+def test_sift_verifies_an_unannotated_twin_of_an_object(monkeypatch, tmp_path):
+    """A broken generator whose clutter is a copy of each annotated object, left unannotated, gives frames showing
+    nothing annotated that sift verifies, above the bar (a val house of seed 0: 6 of 849, 0.7 %, where the bar once
+    allowed 1 %)."""
+    import importlib
+
+    from pin_match.data.synth import SynthSize, generate
+
+    monkeypatch.setattr(importlib.import_module("pin_match.data.synth.generate"), "choose_scanned",
+                        lambda pool, house, rng: list(house))
+    fs = generate(tmp_path / "fs", SynthSize(episodes=6, splits=("val",)), workers=1)
+    score_of, _, _, nothing = _frame_classes(fs, score(fs, "sift", out=tmp_path / "scores",
+                                                       run=RunOptions(progress=False)))
+    assert (score_of[nothing] > 0).mean() > NOTHING_VERIFIED, np.sort(score_of[nothing])[-5:]
 
 
 def test_sift_verified_points_lie_on_the_pasted_object():
