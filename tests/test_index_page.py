@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.flows.compare import Comparison
-from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes, stop_line
+from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes, sight_line, stop_line
 
 
 def _comparison(fm_prec_diff: float, fm_prec_ci: tuple[float, float] = (-5.0, 25.0)) -> Comparison:
@@ -72,3 +72,13 @@ def test_a_stop_says_what_its_goal_point_landed_on():
                                                                                 "same_category"}))
     never = SimpleNamespace(outcome="not found", fired_step=None, stop_step=None, d2g=0.8, landed_on=None)
     assert stop_line(never) == "the agent never stops: 0.8 m from the target at the walk's end"
+
+
+def test_the_page_says_in_how_many_episodes_the_walk_shows_the_target():
+    """Val walk frames only: e1 shows it at 2,500 px, e2 at 40 px, e3 never (a train episode and e3's walk-up view
+    at 3,000 px do not count)."""
+    labels = pd.DataFrame({"episode_id": ["e1", "e1", "e2", "e3", "e3", "t1"],
+                           "split": ["val"] * 5 + ["train"], "approach": [False, False, False, False, True, False],
+                           "target_pixels": [0, 2500, 40, 0, 3000, 9000]})
+    assert sight_line(labels) == ("The walks show the target in 2 of 3 val episodes, at 2,000 px or more in 1: where "
+                                  "a walk never shows it, no matcher can find it.")

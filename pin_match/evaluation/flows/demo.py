@@ -112,7 +112,8 @@ def reads_digest(root: Path, reads: tuple[str, ...]) -> str:
 SCANNED = DemoSet("scanned look-alikes", "",
                   "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
                   "in houses of three rooms, rendered along one exploration walk per house that does not know the "
-                  "target (AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
+                  f"target, cut at its first {SCANNED_SIZE.frames_per_episode} steps (a whole tour takes about 450) "
+                  "(AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
                   "scanned.json",
                   ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", *DEFINITION_READS))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",

@@ -21,6 +21,7 @@ from pin_match.evaluation.core.analysis import BenchRun
 from pin_match.evaluation.core.labels import CM
 from pin_match.evaluation.core.layout import BenchLayout
 from pin_match.evaluation.core.navigation import episodes_at
+from pin_match.evaluation.core.sizes import BAND_EDGES
 from pin_match.evaluation.core.stop import StopPolicy
 from pin_match.evaluation.flows.bench import Bench
 from pin_match.evaluation.flows.compare import Comparison
@@ -34,6 +35,7 @@ EPISODES_SHOWN = 6
 LANDED = {"target": "the target", "same_category": "a look-alike", "other": "another object",
           "background": "nothing annotated"}
 PICTURE_SIZE = 200
+LARGE_PX = BAND_EDGES[1]  # pixels: a target shown this large is one a matcher can be asked to recognise
 INDEX_ASSETS = "index_files"
 
 
@@ -131,6 +133,16 @@ def first_match_roles(run: BenchRun) -> dict[str, pd.DataFrame]:
     return firsts
 
 
+def sight_line(labels: pd.DataFrame) -> str:
+    """In how many val episodes the walk (``labels``: the frame labels) shows the target at all, and large: an
+    episode whose walk never shows its target is lost whatever the matcher, which bounds every SR on the page."""
+    labels = labels[(labels.split == "val") & ~labels.approach]
+    largest = labels.groupby("episode_id").target_pixels.max()
+    shown, large = int((largest > 0).sum()), int((largest >= LARGE_PX).sum())
+    return (f"The walks show the target in {shown} of {len(largest)} val episodes, at {LARGE_PX:,} px or more in "
+            f"{large}: where a walk never shows it, no matcher can find it.")
+
+
 def roles_line(firsts: dict[str, pd.DataFrame], n_val: int) -> str:
     """'What each first match showed, over the 6 val episodes: verify: nothing 3, never fired 3; ...': why a
     matcher misses the target, at a glance (a look-alike, another object, an empty wall, or silence)."""
@@ -186,7 +198,7 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
     shown = min(n_val, EPISODES_SHOWN)
     firsts = first_match_roles(s.bench.run)
     parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results)),
-             html.paragraph(roles_line(firsts, n_val))]
+             html.paragraph(sight_line(s.bench.run.labels)), html.paragraph(roles_line(firsts, n_val))]
     navigation = navigation_line(s.bench.results)
     if navigation:
         parts.append(html.paragraph(navigation))
