@@ -20,6 +20,7 @@ from conftest import make_view, paint
 from pin_match import CropMatcher, MatchResult, Modality, register_matcher
 from pin_match.evaluation import Bootstrap, EvalContext
 from pin_match.evaluation.core.tables import markdown_table
+from pin_match.evaluation.flows.index_page import EPISODES_SHOWN
 from pin_match.scoring import RunOptions
 
 # ids and matcher names become file names, so they hold no "/"; the category holds a whole script element
@@ -179,6 +180,11 @@ def test_index_page_tells_the_story_and_links_every_page(pages):
     linked = {(index.parent / unquote(link)).resolve() for link in page.links}
     assert {p.resolve() for p in [*pages["reports"], pages["compare"]]} <= linked
     assert "First match is the target" in page.text and f"{MATCHER_B} minus {MATCHER_A}" in page.text
+    labels = pages["done"].run.labels
+    val = labels[(labels.split == "val") & ~labels.approach].groupby("episode_id").target_pixels.max()
+    assert f"The walks show the target in {int((val > 0).sum())} of {len(val)} val episodes" in page.text
+    drawn = page.text.count("walk frames,") + page.text.count("never in view on the walk")
+    assert drawn == min(len(val), EPISODES_SHOWN)
 
 
 def test_markdown_tables_keep_their_columns(pages):

@@ -164,11 +164,16 @@ def episode_pictures(s: SetResults, assets: html.Assets, firsts: dict[str, pd.Da
     walks = {m: stops(run, m) for m in run.matchers}
     val = run.frameset.episodes[run.frameset.episodes.split == "val"].set_index("episode_id", drop=False)
     val = val.loc[shown_episodes(list(val.index), [firsts[m].role for m in run.matchers], episodes)]
+    walk = run.labels[~run.labels.approach].groupby("episode_id").target_pixels
+    seen, largest = walk.apply(lambda px: int((px > 0).sum())), walk.max()
     rows = []
     for _, ep in val.iterrows():
         target = run.frameset.target(ep.target_object_id)
+        sight = (f"in view in {seen[ep.episode_id]} walk frames, {largest[ep.episode_id]:,.0f} px at most"
+                 if seen[ep.episode_id] else "never in view on the walk")
         figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
-                                                                  f"target {target.object_id} ({target.category})"])]
+                                                                  f"target {target.object_id} ({target.category})",
+                                                                  sight])]
         for m in run.matchers:
             stop = [stop_line(walks[m][ep.episode_id])] if ep.episode_id in walks[m] else []
             if ep.episode_id not in firsts[m].index:
