@@ -19,7 +19,7 @@ def _time_frames(n: int) -> float:
     """Seconds per rendered frame of a house's walk and approach views (render + mask + camera effects + encoding),
     one process."""
     from pin_match.data.compose import stable_seed
-    from pin_match.data.synth.generate import HousePlan, plan_houses, render_house
+    from pin_match.data.synth.generator import HousePlan, plan_houses, render_house
     from pin_match.data.synth.objects import make_objects
     from pin_match.data.synth.scans import ScanFolder
 
@@ -35,7 +35,7 @@ def _time_frames(n: int) -> float:
 
 
 def _time_references(n: int) -> float:
-    from pin_match.data.synth.generate import render_object
+    from pin_match.data.synth.generator import render_object
     from pin_match.data.synth.objects import make_objects
     from pin_match.data.synth.scans import ScanFolder
 

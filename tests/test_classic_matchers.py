@@ -57,7 +57,7 @@ def test_sift_verifies_an_unannotated_twin_of_an_object(monkeypatch, tmp_path):
 
     from pin_match.data.synth import SynthSize, generate
 
-    monkeypatch.setattr(importlib.import_module("pin_match.data.synth.generate"), "choose_scanned",
+    monkeypatch.setattr(importlib.import_module("pin_match.data.synth.generator"), "choose_scanned",
                         lambda pool, house, rng: list(house))
     fs = generate(tmp_path / "fs", SynthSize(episodes=6, splits=("val",)), workers=1)
     score_of, _, _, nothing = _frame_classes(fs, score(fs, "sift", out=tmp_path / "scores",

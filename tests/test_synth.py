@@ -12,7 +12,7 @@ import pandas as pd
 import pytest
 
 from pin_match.data.synth import SynthError, SynthSize, generate
-from pin_match.data.synth.generate import plan_houses
+from pin_match.data.synth.generator import plan_houses
 from pin_match.data.synth.objects import ObjectSpec, describe, make_objects, title
 from pin_match.data.synth.scans import ScanFolder
 
@@ -114,7 +114,7 @@ def _episodes(houses):
 
 
 def test_targets_come_from_families_with_a_lookalike_in_their_split():
-    from pin_match.data.synth.generate import TARGETS_PER_HOUSE
+    from pin_match.data.synth.generator import TARGETS_PER_HOUSE
 
     specs = ([_spec(f"a{k}", "apple", "train") for k in range(2)] + [_spec("a9", "apple", "val")]
              + [_spec("b0", "box", "train")] + [_spec(f"b{k}", "box", "val") for k in range(1, 4)]
@@ -137,7 +137,7 @@ def test_targets_come_from_families_with_a_lookalike_in_their_split():
 
 
 def test_shipped_plans_keep_splits_and_give_every_target_a_sibling(shipped):
-    from pin_match.data.synth.generate import plan_houses
+    from pin_match.data.synth.generator import plan_houses
 
     specs = make_objects(shipped, 5)
     split_of = {s.object_id: s.split for s in specs}
@@ -157,7 +157,7 @@ def test_shipped_plans_keep_splits_and_give_every_target_a_sibling(shipped):
 def _distractor_counts(specs, seed: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Per planned episode (2,000 at ``seed``): its look-alikes, its other-category objects and its family's other
     members in its split."""
-    from pin_match.data.synth.generate import plan_houses
+    from pin_match.data.synth.generator import plan_houses
 
     same, other, room = [], [], []
     for _, split, target, others in _episodes(plan_houses(specs, seed=seed, episodes=2000)):
@@ -191,7 +191,7 @@ def test_a_broken_generator_leaves_the_distractor_tolerances(shipped, monkeypatc
     fewer in four episodes of ten."""
     import importlib
 
-    monkeypatch.setattr(importlib.import_module("pin_match.data.synth.generate"), broken, value)
+    monkeypatch.setattr(importlib.import_module("pin_match.data.synth.generator"), broken, value)
     same, other, room = _distractor_counts(make_objects(shipped, 5), 0)
     lookalikes_off = abs(same[room >= 3].mean() - LOOKALIKES_MEAN) > MEAN_TOLERANCE
     others_off = abs(other.mean() - OTHERS_MEAN) > MEAN_TOLERANCE or other.min() < 4 or other.max() > 8
@@ -200,7 +200,7 @@ def test_a_broken_generator_leaves_the_distractor_tolerances(shipped, monkeypatc
 
 def test_scanned_clutter_is_never_of_a_family_of_the_house(shipped):
     from pin_match.data.synth.clutter import SCANNED, choose_scanned
-    from pin_match.data.synth.generate import plan_houses
+    from pin_match.data.synth.generator import plan_houses
 
     specs = make_objects(shipped, 5)
     for house_id, split, objs, _ in plan_houses(specs, seed=0, episodes=30):
@@ -288,7 +288,7 @@ def test_a_house_s_episodes_read_one_walk_rendered_once(synth):
 def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
     """One house rendered for two different targets: byte-identical frames, the roles aside."""
     from pin_match.data.compose import stable_seed
-    from pin_match.data.synth.generate import plan_houses, render_house
+    from pin_match.data.synth.generator import plan_houses, render_house
     from pin_match.data.synth.house import HousePlan
 
     specs = make_objects(shipped, 2)
@@ -310,7 +310,7 @@ def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
 def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
     """Three rooms in a row, each doorway passable; every step of an exploration walk stays on free floor, and the
     whole tour visits every room."""
-    from pin_match.data.synth.generate import ROOMS
+    from pin_match.data.synth.generator import ROOMS
     from pin_match.data.synth.scene import make_house
     from pin_match.data.synth.tour import exploration_walk
     from pin_match.data.synth.walk import Grid, floor_map
@@ -478,7 +478,7 @@ def test_a_broken_generator_falls_below_the_default_set_s_bars(monkeypatch, tmp_
     never reaches), each fall below the bars above, on a default set's val house (seed 0)."""
     import importlib
 
-    generate_module = importlib.import_module("pin_match.data.synth.generate")
+    generate_module = importlib.import_module("pin_match.data.synth.generator")
     if broken == "one room":
         monkeypatch.setattr(importlib.import_module("pin_match.data.synth.house"), "ROOMS", 1)
         monkeypatch.setattr(generate_module, "ROOMS", 1)
@@ -488,6 +488,18 @@ def test_a_broken_generator_falls_below_the_default_set_s_bars(monkeypatch, tmp_
     fs = generate(tmp_path / "fs", SynthSize(episodes=6, splits=("val",)), workers=1)
     misses = _default_set_misses(fs)
     assert missed <= set(misses), misses
+
+
+def test_generate_is_the_function_whichever_module_was_imported_first():
+    """A fresh process that imports the generator's module before asking the package for ``generate`` still gets the
+    function (a module of the function's name once replaced it)."""
+    import subprocess
+    import sys
+
+    code = ("import pin_match.data.synth.generator; from pin_match.data.synth import generate; "
+            "print('callable', callable(generate))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert "callable True" in out, out
 
 
 def test_a_renderer_leaves_no_folder_behind():

@@ -2,7 +2,8 @@
 
 See docs/synthetic.md for what is modelled and why this renderer. ``generate`` is imported on first
 use (PEP 562): pybullet prints a banner when it loads, which the command line's help and every
-command that renders nothing should not show.
+command that renders nothing should not show. Its module is ``generator``: a submodule of the function's
+own name would replace the function here as soon as anything imported the submodule.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ __all__ = ["SynthError", "SynthSize", "generate"]
 
 def __getattr__(name: str) -> Any:
     if name == "generate":
-        from pin_match.data.synth.generate import generate
+        from pin_match.data.synth.generator import generate
 
-        globals()["generate"] = generate  # importing the submodule bound its own name here: the function wins
+        globals()["generate"] = generate  # kept: the next lookup is a plain attribute
         return generate
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

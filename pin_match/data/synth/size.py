@@ -23,7 +23,7 @@ class SynthSize:
 
 
 DEFINITION_READS = ("data/agent.py", "data/compose.py", "data/geometry.py", "data/synth/__init__.py",
-                    "data/synth/clutter.py", "data/synth/generate.py", "data/synth/house.py", "data/synth/objects.py",
+                    "data/synth/clutter.py", "data/synth/generator.py", "data/synth/house.py", "data/synth/objects.py",
                     "data/synth/placing.py", "data/synth/render.py", "data/synth/scans.py", "data/synth/scene.py",
                     "data/synth/sensor.py", "data/synth/shapes.py", "data/synth/size.py", "data/synth/textures.py",
                     "data/synth/tour.py", "data/synth/walk.py")  # the code a house is made by, under the package:

@@ -22,7 +22,7 @@ import numpy as np
 
 from pin_match import atomic
 from pin_match.data.frameset import FrameSet
-from pin_match.data.synth.generate import GENERATOR_VERSION, definition, plan_set
+from pin_match.data.synth.generator import GENERATOR_VERSION, definition, plan_set
 from pin_match.data.synth.house import HousePlan, HouseWorld
 from pin_match.data.synth.objects import SynthError
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
