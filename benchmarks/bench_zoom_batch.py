@@ -12,8 +12,6 @@ outputs is printed beside the times (docs/performance.md).
 
 from __future__ import annotations
 
-import argparse
-
 import numpy as np
 import torch
 
@@ -63,11 +61,7 @@ def run(quick: bool) -> dict:
     return out
 
 
-def main() -> None:
-    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--quick", action="store_true")
-    run(p.parse_args().quick)
-
-
 if __name__ == "__main__":
-    main()
+    import sys
+
+    run(quick="--quick" in sys.argv)
