@@ -80,5 +80,6 @@ def test_the_page_says_in_how_many_episodes_the_walk_shows_the_target():
     labels = pd.DataFrame({"episode_id": ["e1", "e1", "e2", "e3", "e3", "t1"],
                            "split": ["val"] * 5 + ["train"], "approach": [False, False, False, False, True, False],
                            "target_pixels": [0, 2500, 40, 0, 3000, 9000]})
+    labels["target_visible"] = labels.target_pixels > 0
     assert sight_line(labels) == ("The walks show the target in 2 of 3 val episodes, at 2,000 px or more in 1: where "
                                   "a walk never shows it, no matcher can find it.")

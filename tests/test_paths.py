@@ -51,8 +51,8 @@ def test_parts_join_diagonal_neighbours_and_the_largest_is_the_first_of_equals()
     assert len({parts[0, 0], parts[0, 3], parts[3, 0], parts[3, 3]}) == 4
     assert [tuple(int(v) for v in walks.cells[c]) for c in walks.largest_part()] == [(0, 0), (1, 1)]
     free[2, 3] = True
-    assert [tuple(int(v) for v in c) for c in GridWalks(free, 1.0).cells[GridWalks(free, 1.0).largest_part()]] \
-        == [(0, 3), (1, 3), (2, 3), (3, 3)]
+    joined = GridWalks(free, 1.0)
+    assert [tuple(int(v) for v in joined.cells[c]) for c in joined.largest_part()] == [(0, 3), (1, 3), (2, 3), (3, 3)]
 
 
 def test_the_floor_map_and_the_generator_s_grid_walk_on_one_engine():

@@ -133,13 +133,19 @@ def first_match_roles(run: BenchRun) -> dict[str, pd.DataFrame]:
     return firsts
 
 
+def target_sight(labels: pd.DataFrame) -> pd.DataFrame:
+    """Per episode of ``labels`` (the frame labels), how many of its walk's frames show its target (walk-up views
+    left out) and the most pixels it covered in one: whether the walk gave a matcher anything to find."""
+    walk = labels[~labels.approach].groupby("episode_id")
+    return pd.DataFrame({"frames": walk.target_visible.sum(), "largest": walk.target_pixels.max()})
+
+
 def sight_line(labels: pd.DataFrame) -> str:
-    """In how many val episodes the walk (``labels``: the frame labels) shows the target at all, and large: an
-    episode whose walk never shows its target is lost whatever the matcher, which bounds every SR on the page."""
-    labels = labels[(labels.split == "val") & ~labels.approach]
-    largest = labels.groupby("episode_id").target_pixels.max()
-    shown, large = int((largest > 0).sum()), int((largest >= LARGE_PX).sum())
-    return (f"The walks show the target in {shown} of {len(largest)} val episodes, at {LARGE_PX:,} px or more in "
+    """In how many val episodes the walk shows the target at all, and large (``target_sight``): an episode whose
+    walk never shows its target is lost whatever the matcher, which bounds every SR on the page."""
+    sight = target_sight(labels[labels.split == "val"])
+    shown, large = int((sight.frames > 0).sum()), int((sight.largest >= LARGE_PX).sum())
+    return (f"The walks show the target in {shown} of {len(sight)} val episodes, at {LARGE_PX:,} px or more in "
             f"{large}: where a walk never shows it, no matcher can find it.")
 
 
@@ -164,13 +170,12 @@ def episode_pictures(s: SetResults, assets: html.Assets, firsts: dict[str, pd.Da
     walks = {m: stops(run, m) for m in run.matchers}
     val = run.frameset.episodes[run.frameset.episodes.split == "val"].set_index("episode_id", drop=False)
     val = val.loc[shown_episodes(list(val.index), [firsts[m].role for m in run.matchers], episodes)]
-    walk = run.labels[~run.labels.approach].groupby("episode_id").target_pixels
-    seen, largest = walk.apply(lambda px: int((px > 0).sum())), walk.max()
+    sights = target_sight(run.labels)
     rows = []
     for _, ep in val.iterrows():
         target = run.frameset.target(ep.target_object_id)
-        sight = (f"in view in {seen[ep.episode_id]} walk frames, {largest[ep.episode_id]:,.0f} px at most"
-                 if seen[ep.episode_id] else "never in view on the walk")
+        frames, largest = sights.loc[ep.episode_id]
+        sight = f"in view in {frames} walk frames, {largest:,} px at most" if frames else "never in view on the walk"
         figures = [html.figure(reference_images(assets, target), [f"episode {ep.episode_id}",
                                                                   f"target {target.object_id} ({target.category})",
                                                                   sight])]
