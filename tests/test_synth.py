@@ -507,7 +507,7 @@ def test_a_renderer_leaves_no_folder_behind():
     import subprocess
     import sys
 
-    code = "from pin_match.data.synth.render import Renderer; r = Renderer(); print('folder', r._tmp)"
+    code = "from pin_match.data.synth.render import Renderer; r = Renderer(); print('folder', r._folder.name)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     folder = Path(next(line for line in out.splitlines() if line.startswith("folder ")).split(" ", 1)[1])
     assert folder.name.startswith("pin_match_synth_") and not folder.exists()

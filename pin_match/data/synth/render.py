@@ -49,8 +49,7 @@ class Renderer:
 
     def __init__(self) -> None:
         self.client = p.connect(p.DIRECT)
-        self._folder = tempfile.TemporaryDirectory(prefix="pin_match_synth_")  # removed when the process ends
-        self._tmp = self._folder.name
+        self._folder = tempfile.TemporaryDirectory(prefix="pin_match_synth_")  # removed on close, or at exit
         self._textures = 0
 
     def reset(self) -> None:
@@ -62,7 +61,7 @@ class Renderer:
         Each texture gets a new file name: pybullet caches textures by name, even across resets.
         """
         self._textures += 1
-        path = os.path.join(self._tmp, f"texture{self._textures}.png")
+        path = os.path.join(self._folder.name, f"texture{self._textures}.png")
         cv2.imwrite(path, cv2.cvtColor(np.ascontiguousarray(image), cv2.COLOR_RGB2BGR))
         try:
             tex = p.loadTexture(path, physicsClientId=self.client)
@@ -106,7 +105,7 @@ class Renderer:
 
     def close(self) -> None:
         p.disconnect(self.client)
-        os.rmdir(self._tmp)
+        self._folder.cleanup()
 
 
 # ------------------------------------------------------------------ reference views
