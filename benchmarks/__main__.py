@@ -23,7 +23,8 @@ from benchmarks.loadavg import QUIET_LOAD, load_1min, refusal
 MODULES = ("bench_pipeline", "bench_weight_free", "bench_sweep", "bench_synth", "bench_memory",
            "bench_model_matchers_a", "bench_model_matchers_b", "bench_distributed", "bench_training",
            "bench_glue_matchers", "bench_effnet", "bench_effnet_variants", "bench_verify", "bench_shared_pass",
-           "bench_network_share", "bench_fold", "bench_seen_batches", "bench_zoom_batch")
+           "bench_network_share", "bench_fold", "bench_seen_batches", "bench_zoom_batch",
+           "bench_refine_floor")
 
 
 def machine() -> dict:

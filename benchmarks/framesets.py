@@ -27,6 +27,15 @@ def synthetic(name: str, **settings) -> FrameSet:
     return cached(CACHE / name, lambda root: generate(root, SynthSize(**settings), overwrite=True))
 
 
+def demo_scanned() -> FrameSet:
+    """The demo's scanned set, its val split alone (one house's whole tour, read by 3 episodes), as ``pin-match
+    demo`` renders it at shipped sigmas."""
+    from pin_match.evaluation.flows.demo import scanned
+    from pin_match.scoring import RunOptions
+
+    return cached(CACHE / "demo_scanned_val", lambda root: scanned(root, 0, RunOptions(progress=False), val_only=True))
+
+
 def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:
     """Many cheap frames (coloured rectangles, one of them the target) for memory and throughput scaling."""
     name = f"procedural_{n_frames}" if frames_per_episode == 100 else f"procedural_{n_frames}_per{frames_per_episode}"

@@ -41,8 +41,9 @@ with the references'. This matcher does that with the default ``effnet``:
    zoomed once more: a square of ``REFINE_SHARE`` of its box's longer side, at least
    ``REFINE_MIN_SIDE`` px, around that cell; there a cell's likeness plus ``REFINE_COLOUR`` x
    its pixels' mean colour back-projection (``color``'s ratio histogram of the references'
-   colours over the frame's) picks the frame's first point); then the region's cells by
-   locate score. Every point carries its candidate's score; the boxes come back with the
+   colours over the frame's) picks the frame's first point) where the frame scores ``refine_floor`` or
+   more: the point an agent walks to is a goal's, at or above sigma, and no score reads it; then the
+   region's cells by locate score. Every point carries its candidate's score; the boxes come back with the
    result, each with the reference view its zoomed descriptor matched best
    (``MatchResult.box_views``). The points and views need the zoom: with
    none of its signals they are the region's cells and no views.
@@ -102,6 +103,9 @@ DEFAULT_COLOR_GATE = 0.8
 REFINE_SHARE = 0.4
 REFINE_MIN_SIDE = 64
 REFINE_COLOUR = 0.5  # weight of the colour back-projection beside the likeness (0-1 each) in the second zoom
+# the second zoom moves a point only an agent walking to a goal reads: a goal is a frame at or above sigma, and every
+# sigma tuned for verify so far is 0.376 or more (docs/results.md), so frames under this floor keep the zoom's cell
+DEFAULT_REFINE_FLOOR = 0.25
 # what the signals' values depend on besides the config and the parts; the matcher's version also counts where the
 # points go, which no signal reads: version 2 moved the points, so a verifier file fitted on version 1 still fits
 SIGNALS_VERSION = 1
@@ -127,6 +131,9 @@ class VerifyConfig(MatcherConfig):
         "help": "colour overlap below which a candidate's logit drops in proportion to the shortfall (the verifier "
                 "file's fitted gate slope; at most slope x color_gate, at overlap 0): a bounded colour penalty, "
                 "not a veto; 0: none, colour only adds"})
+    refine_floor: float = field(default=DEFAULT_REFINE_FLOOR, metadata={
+        "help": "a frame scoring at least this gets its first point from a second, closer zoom; below it the point "
+                "is the first zoom's cell (no score reads it; 0: every frame)"})
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -140,6 +147,8 @@ class VerifyConfig(MatcherConfig):
             raise ConfigError(f"{type(self).__name__}: color_bins={self.color_bins!r}; three positive counts (H, S, V)")
         if not 0.0 <= self.pad <= 1.0 or self.region_drop < 0.0:
             raise ConfigError(f"{type(self).__name__}: pad must be in [0, 1] and region_drop >= 0")
+        if not 0.0 <= self.refine_floor <= 1.0:
+            raise ConfigError(f"{type(self).__name__}: refine_floor={self.refine_floor!r}; a score in [0, 1]")
         if not 0.0 <= self.color_gate < 1.0 or (self.color_gate and "color" not in self.signals):
             raise ConfigError(f"{type(self).__name__}: color_gate={self.color_gate!r}; in [0, 1), and above 0 only "
                               f"with the color signal")
@@ -168,7 +177,7 @@ class VerifyMatcher(CompositeMatcher):
     # PIN's first-match objective on MyVLM pasted's train instances (docs/instance-matchers.md); how far this
     # one sigma carries to other sets is measured there: tune it on frames like the agent's
     default_sigma = 0.658
-    version = 2  # 2: the first point is the zoomed peak; boxes say which view matched
+    version = 3  # 2: the first point is the zoomed peak; boxes say which view matched; 3: the second zoom above a floor
     paper = ("detect, then re-identify (CNOS, Nguyen et al., ICCVW 2023; NIDS-Net, Lu et al., 2024) with "
              "cycle-consistent cell matches (Matcher, Liu et al., ICLR 2024) and a colour check (PInVerify, 2026)")
 
@@ -191,11 +200,11 @@ class VerifyMatcher(CompositeMatcher):
 
     @property
     def signals_id(self) -> str:
-        """Hash of everything the signals' values depend on: not the verifier file, which signals are used or the
-        colour gate (an ablation reads the same cached signals)."""
+        """Hash of everything the signals' values depend on: not the verifier file, which signals are used, the
+        colour gate (an ablation reads the same cached signals) or where the second zoom runs."""
         config = self.cfg.hashed_dict()
-        for decision_only in ("weights", "signals", "color_gate"):
-            config.pop(decision_only, None)
+        for not_a_signal in ("weights", "signals", "color_gate", "refine_floor"):
+            config.pop(not_a_signal, None)
         payload = dict(version=SIGNALS_VERSION, config=config, parts={r: p.id for r, p in self.parts().items()})
         return hashlib.sha256(json.dumps(payload, sort_keys=True, default=str).encode()).hexdigest()[:12]
 
@@ -310,7 +319,7 @@ class VerifyMatcher(CompositeMatcher):
     def _refined(self, images: list[np.ndarray], best: list[Candidate]) -> list[Candidate]:
         """Each image's best candidate with its first point found again in a second, closer zoom (module doc,
         step 5); unchanged without the zoom."""
-        if any(c.view is None for c in best):
+        if not best or any(c.view is None for c in best):
             return best
         squares = [square_around(tuple(c.points[0]), max(REFINE_MIN_SIDE, REFINE_SHARE * max(
             c.box[2] - c.box[0], c.box[3] - c.box[1])), (image.shape[1], image.shape[0]))
@@ -334,8 +343,9 @@ class VerifyMatcher(CompositeMatcher):
         scores = [np.array([verdict(spec, signals) for _, signals in rows], np.float32) for rows in per_image]
         cands = [[c for c, _ in rows] for rows in per_image]
         best = [int(s.argmax()) for s in scores]
-        for found, b, refined in zip(cands, best, self._refined(frames, [c[b] for c, b in zip(cands, best)])):
-            found[b] = refined
+        closer = [i for i, s in enumerate(scores) if s.max() >= self.cfg.refine_floor]
+        for i, refined in zip(closer, self._refined([frames[i] for i in closer], [cands[i][best[i]] for i in closer])):
+            cands[i][best[i]] = refined
         results = []
         for found, s, b in zip(cands, scores, best):
             order = [b] + [i for i in range(len(found)) if i != b]  # the best candidate's points first

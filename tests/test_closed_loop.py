@@ -237,7 +237,7 @@ def tiny_synth(tmp_path_factory):
     from pin_match.data.synth import SynthSize, generate
 
     return generate(tmp_path_factory.mktemp("synth") / "fs", SynthSize(seed=3, episodes=2, objects_per_family=2,
-                                                                       frames_per_episode=40), workers=1)
+                                                                       frames_per_episode=40, rooms=2), workers=1)
 
 
 @pytest.mark.slow
@@ -271,6 +271,18 @@ def test_walk_ups_are_rendered_in_the_house_once_and_scored_through_the_engine(t
     again = rows()
     pd.testing.assert_frame_equal(first, again)
     assert {p: p.stat().st_mtime_ns for p in views} == stamps
+
+
+@pytest.mark.slow
+def test_a_set_s_houses_are_staged_again_with_its_own_rooms(tiny_synth, tmp_path):
+    """A set of two-room houses is staged again in two-room houses (the walk-ups' house is the walk's), whatever the
+    default."""
+    from pin_match.data.synth.scene import make_house
+    from pin_match.data.synth.walkups import SynthHouses
+
+    plans = SynthHouses(tiny_synth, tmp_path / "views").plans.values()
+    assert tiny_synth.manifest["provenance"]["rooms"] == 2 and {p.rooms for p in plans} == {2}
+    assert all(len(make_house(np.random.default_rng(p.scene_seed), p.rooms).rooms) == 2 for p in plans)
 
 
 @pytest.mark.slow

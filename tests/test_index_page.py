@@ -6,7 +6,15 @@ import numpy as np
 import pandas as pd
 
 from pin_match.evaluation.flows.compare import Comparison
-from pin_match.evaluation.flows.index_page import comparison_lines, roles_line, shown_episodes, sight_line, stop_line
+from pin_match.evaluation.flows.index_page import (
+    closed_loop_caption,
+    closed_loop_line,
+    comparison_lines,
+    roles_line,
+    shown_episodes,
+    sight_line,
+    stop_line,
+)
 
 
 def _comparison(fm_prec_diff: float, fm_prec_ci: tuple[float, float] = (-5.0, 25.0)) -> Comparison:
@@ -83,3 +91,29 @@ def test_the_page_says_in_how_many_episodes_the_walk_shows_the_target():
     labels["target_visible"] = labels.target_pixels > 0
     assert sight_line(labels) == ("The walks show the target in 2 of 3 val episodes, at 2,000 px or more in 1: where "
                                   "a walk never shows it, no matcher can find it.")
+
+
+def _walks(*rows: dict) -> pd.DataFrame:
+    """Episode rows with the columns the page reads (``navigation.EPISODE_COLUMNS``' that matter here)."""
+    base = dict(fired_step=None, stop_step=None, d2g=4.0, landed_on=None, spl=0.0, steps=300, unplaced_candidates=0,
+                rejected=0, rejections=None, rejected_target=0, rejected_lookalike=0, rejected_other=0,
+                rejected_nothing=0)
+    return pd.DataFrame([base | row for row in rows]).set_index("episode_id", drop=False)
+
+
+def test_the_closed_loop_says_what_it_turned_down_and_where_it_stopped():
+    """Hand-made walks: the closed loop turned a look-alike down and then found the target, where the first match
+    had stopped at the look-alike."""
+    loop = _walks(dict(episode_id="e1", outcome="success", fired_step=51, stop_step=187, d2g=0.5, landed_on="target",
+                       spl=0.6, rejected=1, rejections="51:same_category:0.412", rejected_lookalike=1),
+                  dict(episode_id="e2", outcome="not found"))
+    first = _walks(dict(episode_id="e1", outcome="category error", fired_step=51, stop_step=51),
+                   dict(episode_id="e2", outcome="not found"))
+    line = closed_loop_line({"verify": loop}, {"verify": first})
+    assert "approach:1" in line and line.endswith("verify SR 50.0 %, CE 0.0 % (the stop rule above: SR 0.0 %, CE "
+                                                  "50.0 %), 1 candidates turned down (1 look-alikes, 0 the target).")
+    assert closed_loop_caption(loop.loc["e1"]) == (
+        "closed loop: turned down a look-alike at step 51 (close look 0.412); the agent stops at step 187 (its goal "
+        "point on: the target): success, 0.50 m from the target")
+    assert closed_loop_caption(loop.loc["e2"]).startswith("closed loop: turned down nothing; the agent never stops")
+    assert closed_loop_line({"verify": pd.DataFrame()}, {"verify": first}) is None  # no house to walk up in

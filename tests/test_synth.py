@@ -51,6 +51,15 @@ def test_same_seed_same_bytes_whatever_the_workers(synth, tmp_path):
     assert again.fingerprint == synth.fingerprint
 
 
+def test_a_house_split_over_the_workers_gives_the_bytes_it_gives_whole(tmp_path):
+    """One house and two workers: each renders half of its walk, in a house staged from the same plan."""
+    one_house = replace(SMALL, splits=("val",))
+    split = generate(tmp_path / "a" / "fs", one_house, workers=2)
+    whole = generate(tmp_path / "b" / "fs", one_house, workers=1)
+    assert len(set(split.episodes.scene_id)) == 1 and len(split.frames) == 2 * SMALL.frames_per_episode
+    assert tree_hash(split.root) == tree_hash(whole.root)
+
+
 # ---------------------------------------------------------------- instances from the scan folder
 def test_make_objects_caps_each_family_in_each_split(shipped):
     specs = make_objects(shipped, 2)
@@ -310,19 +319,19 @@ def test_the_walk_does_not_depend_on_the_target(shipped, tmp_path):
 def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
     """Three rooms in a row, each doorway passable; every step of an exploration walk stays on free floor, and the
     whole tour visits every room."""
-    from pin_match.data.synth.generator import ROOMS
+    rooms = SynthSize().rooms
     from pin_match.data.synth.scene import make_house
     from pin_match.data.synth.tour import exploration_walk
     from pin_match.data.synth.walk import Grid, floor_map
 
     for seed in range(3):
-        house = make_house(np.random.default_rng(seed), ROOMS)
-        assert len(house.rooms) == ROOMS >= 2
+        house = make_house(np.random.default_rng(seed), rooms)
+        assert len(house.rooms) == rooms >= 2
         grid = Grid(house, list(house.footprints))
         floor = floor_map(house, list(house.footprints))
         reached = np.argwhere(np.isfinite(grid.path_lengths(tuple(int(v) for v in np.argwhere(grid.free)[0]))))
         assert len(reached) == grid.free.sum(), seed  # one floor: every room reached through the doorways
-        assert {house.room_of(*grid.centre(c)) for c in reached} == set(range(ROOMS)), seed
+        assert {house.room_of(*grid.centre(c)) for c in reached} == set(range(rooms)), seed
         walk = exploration_walk(house, list(house.footprints), [], 1000, np.random.default_rng(seed))
         assert 60 < len(walk) < 1000  # the tour ends once every piece of furniture was looked at
         for (ax, ay, _, _), (bx, by, _, _) in zip(walk, walk[1:]):
@@ -330,7 +339,7 @@ def test_houses_have_rooms_joined_by_doors_and_walks_keep_to_the_floor():
             for f in np.linspace(0.0, 1.0, 6):  # never through a wall: every point of the step is standable floor
                 x, y = ax + f * (bx - ax), ay + f * (by - ay)
                 assert floor.free[int(x / floor.cell), int(y / floor.cell)], (seed, x, y)
-        assert len({house.room_of(x, y) for x, y, _, _ in walk}) == ROOMS, seed  # and that takes it to every room
+        assert len({house.room_of(x, y) for x, y, _, _ in walk}) == rooms, seed  # and that takes it to every room
 
 
 def test_objects_csv_names_each_scan_and_its_licence(synth, shipped):
@@ -479,13 +488,11 @@ def test_a_broken_generator_falls_below_the_default_set_s_bars(monkeypatch, tmp_
     import importlib
 
     generate_module = importlib.import_module("pin_match.data.synth.generator")
-    if broken == "one room":
-        monkeypatch.setattr(importlib.import_module("pin_match.data.synth.house"), "ROOMS", 1)
-        monkeypatch.setattr(generate_module, "ROOMS", 1)
-    else:
+    if broken == "tour cut short":
         tour = generate_module.exploration_walk
         monkeypatch.setattr(generate_module, "exploration_walk", lambda *args: tour(*args)[:40])
-    fs = generate(tmp_path / "fs", SynthSize(episodes=6, splits=("val",)), workers=1)
+    fs = generate(tmp_path / "fs", SynthSize(episodes=6, splits=("val",), rooms=1 if broken == "one room" else 3),
+                  workers=1)
     misses = _default_set_misses(fs)
     assert missed <= set(misses), misses
 

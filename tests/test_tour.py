@@ -10,12 +10,12 @@ import numpy as np
 import pytest
 
 from pin_match.data.agent import CAMERA_HEIGHT, FORWARD_STEP, HALF_HFOV, HALF_VFOV, TURN
-from pin_match.data.synth import tour
+from pin_match.data.synth import SynthSize, tour
 from pin_match.data.synth.placing import place_objects
 from pin_match.data.synth.scene import Room, Surface, make_house
 from pin_match.data.synth.walk import Grid
 
-ROOMS = 3
+ROOMS = SynthSize().rooms  # the default set's houses
 LIMIT = 1000  # PIN's episode limit: the budget the generator passes
 
 

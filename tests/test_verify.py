@@ -357,6 +357,32 @@ def test_fit_on_the_tiny_set_and_the_live_scores_are_the_cached_signals_fused(ti
     assert set(target_frame.box_views.tolist()) <= {0, 1, 2}
 
 
+def test_the_second_zoom_runs_on_frames_at_its_floor_only_and_moves_no_score(tiny_frameset, monkeypatch):
+    """The closer zoom only moves the first point: under ``refine_floor`` a frame keeps every score and box of the
+    whole run, and its points are the whole run's without the refined one in front."""
+    episode = tiny_frameset.episodes.iloc[1]
+    ids = list(tiny_frameset.frames.frame_id[tiny_frameset.frames.episode_id == episode.episode_id])
+    images = [tiny_frameset.image(f) for f in ids]
+    every = create_matcher("verify", refine_floor=0.0)
+    every.prepare(tiny_frameset.target(episode.target_object_id))
+    whole = every.match_batch(images)
+    scores = sorted(r.score for r in whole)
+    floor = (scores[1] + scores[2]) / 2  # two frames on each side
+    gated = create_matcher("verify", refine_floor=floor)
+    assert gated.id != every.id and gated.signals_id == every.signals_id  # one cached table of signals for both
+    gated.prepare(tiny_frameset.target(episode.target_object_id))
+    zoomed, refined = [], VerifyMatcher._refined
+    monkeypatch.setattr(VerifyMatcher, "_refined", lambda self, im, best: zoomed.append(len(im)) or refined(
+        self, im, best))
+    for a, b in zip(whole, gated.match_batch(images)):
+        assert b.score == a.score and np.array_equal(b.boxes, a.boxes) and np.array_equal(b.box_scores, a.box_scores)
+        assert np.array_equal(b.points, a.points if a.score >= floor else a.points[1:])
+        assert np.array_equal(b.point_scores, a.point_scores if a.score >= floor else a.point_scores[1:])
+    assert zoomed == [2]
+    with pytest.raises(ConfigError, match="refine_floor"):
+        create_matcher("verify", refine_floor=1.5)
+
+
 def test_locate_signals_alone_need_no_second_pass(tiny_frameset, tmp_path):
     locate_only = dict(signals=("proto", "margin"), color_gate=0.0)
     matcher = create_matcher("verify", **locate_only)

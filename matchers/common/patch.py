@@ -93,8 +93,9 @@ class PatchConfig(CropConfig):
             raise ConfigError(f"{type(self).__name__}: img_size={self.img_size} is too small")
 
 
-REMEMBERED_BYTES = 384 * 2**20  # crop features a matcher keeps: a house's walk and approach views (about 120 frames,
-# two crops each: 240 MB at effnet's 196 x 1280 tokens a crop) fit, so each of its episodes reads them again
+REMEMBERED_BYTES = 1280 * 2**20  # crop features a matcher keeps: a house's whole tour fits (356-501 frames in the
+# default set, docs/synthetic.md; two crops each, 1 MB a crop at effnet's 196 x 1280 float32 tokens), so each of its
+# episodes reads them again; 384 MB, a walk of 120 frames, made every episode of a tour run the network again
 
 
 class SeenBatches:

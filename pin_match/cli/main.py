@@ -49,7 +49,7 @@ def _cmd_synth(a: argparse.Namespace) -> None:
     from pin_match.data.synth import generate
 
     given = dict(seed=a.seed, episodes=a.episodes, frames_per_episode=a.frames_per_episode,
-                 objects_per_family=a.objects_per_family, walk=a.walk)
+                 objects_per_family=a.objects_per_family, walk=a.walk, rooms=a.rooms)
     size = replace(PRESETS[a.preset], **{k: v for k, v in given.items() if v is not None})
     fs = generate(a.out, size, scans=a.scans, workers=a.workers, overwrite=a.overwrite,
                   progress=run_options(a).progress)
@@ -113,6 +113,7 @@ def _add_synth(sub: argparse._SubParsersAction) -> None:
                                                  "the target, every episode of the house reads it; 'seek': each "
                                                  "episode's walk heads for its target and stops beside it (it knows "
                                                  "the answer: first-match studies only)")
+    s.add_argument("--rooms", type=int, help=f"rooms per house, in a row joined by doors (default {default.rooms})")
     s.add_argument("--scans", type=Path, help="a scan folder from `pin-match data prepare gso` (default: the scans "
                                               "shipped with pin_match); its families.csv names the families")
     add_run_options(s, workers="rendering processes (default: all cores); output is the same", batch_size=False)

@@ -22,7 +22,7 @@ from pin_match.data.frameset import FrameSet
 from pin_match.data.geometry import CameraModel, EpisodeGeometry, FloorMap
 from pin_match.data.geometry import Pose as CameraPose
 from pin_match.data.synth.clutter import choose_scanned
-from pin_match.data.synth.house import ROOMS, HousePlan, HouseWorld, Stage, renderer
+from pin_match.data.synth.house import HousePlan, HouseWorld, Stage, renderer
 from pin_match.data.synth.objects import ObjectSpec, SynthError, make_objects
 from pin_match.data.synth.render import reference_views
 from pin_match.data.synth.scans import PACKAGED_SCANS, ScanFolder
@@ -98,7 +98,7 @@ def plan_set(size: SynthSize, folder: ScanFolder, staging: str = "") -> tuple[li
                                  np.random.default_rng(stable_seed(size.seed, "clutter", house_id)))
         plans.append(HousePlan(house_id, split, stable_seed(size.seed, "scene", house_id),
                                stable_seed(size.seed, "house", house_id), tuple(objs), tuple(episodes),
-                               size.frames_per_episode, size.walk, staging, tuple(clutter)))
+                               size.frames_per_episode, size.walk, staging, tuple(clutter), size.rooms))
     return [s for s in specs if s.object_id in in_houses], plans
 
 
@@ -134,8 +134,10 @@ def _episode_geometry(ids: list[str], families: list[str], target: int, house: R
 EpisodeOutput = tuple[str, list[FrameRecord], EpisodeGeometry]
 
 
-def render_house(plan: HousePlan) -> list[EpisodeOutput]:
-    """A house's episodes, in plan order: each walk rendered once and written for every episode that reads it."""
+def render_house(plan: HousePlan, part: tuple[int, int] = (0, 1)) -> list[EpisodeOutput]:
+    """A house's episodes, in plan order: each walk rendered once and written for every episode that reads it; with
+    ``part`` (k, n) only the k-th of n runs of each walk's steps. Every part stages the house from its plan, the same
+    house bit for bit, so a house split over workers gives the bytes it gives whole."""
     world = HouseWorld.build(plan)
     house, stage, rng = world.house, world.stage, world.rng
     ids = [s.object_id for s in plan.objects]
@@ -149,19 +151,22 @@ def render_house(plan: HousePlan) -> list[EpisodeOutput]:
                                plan.frames, rng, world.sight), [(episode_id, t)]) for episode_id, t in plan.episodes]
     floor = floor_map(house, stage.obstacles)
     out = {}
+    k, n = part
     for walk, episodes in groups:
-        records = _render_walk(world, walk, episodes)
+        records = _render_walk(world, walk[:len(walk) * (k + 1) // n], episodes, len(walk) * k // n)
         for episode_id, t in episodes:
             out[episode_id] = (episode_id, records[episode_id],
                                _episode_geometry(ids, families, t, house, stage, walk, floor))
     return [out[episode_id] for episode_id, _ in plan.episodes]
 
 
-def _render_walk(world: HouseWorld, walk: list[Pose], episodes: list[tuple[str, int]]) -> dict[str, list[FrameRecord]]:
-    """Each pose rendered and developed once, then written for every episode in ``episodes`` with its own roles."""
+def _render_walk(world: HouseWorld, walk: list[Pose], episodes: list[tuple[str, int]],
+                 first: int = 0) -> dict[str, list[FrameRecord]]:
+    """Each pose from step ``first`` on rendered and developed once, then written for every episode in ``episodes``
+    with its own roles."""
     legends = {episode_id: world.plan.legend(t) for episode_id, t in episodes}
     records: dict[str, list[FrameRecord]] = {episode_id: [] for episode_id, _ in episodes}
-    for step, pose in enumerate(walk):
+    for step, pose in enumerate(walk[first:], start=first):
         frame, stored = world.shot(pose, ("noise", step))
         for episode_id, legend in legends.items():
             records[episode_id].append(encode_frame(world.plan.staging, episode_id, step, replace(frame, legend=legend),
@@ -169,10 +174,16 @@ def _render_walk(world: HouseWorld, walk: list[Pose], episodes: list[tuple[str, 
     return records
 
 
+def _render_part(task: tuple[HousePlan, tuple[int, int]]) -> list[EpisodeOutput]:
+    return render_house(*task)
+
+
 # ------------------------------------------------------------------ entry point
 def _check(size: SynthSize) -> None:
     if size.episodes < 2:
         raise SynthError(f"episodes must be at least 2 (one train, one val), got {size.episodes}")
+    if size.rooms < 1:
+        raise SynthError(f"rooms must be at least 1, got {size.rooms}")
     if size.frames_per_episode < 1:
         raise SynthError(f"frames_per_episode must be positive, got {size.frames_per_episode}")
     if not size.splits or set(size.splits) - {"train", "val"}:
@@ -200,7 +211,7 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
     folder = ScanFolder.open(PACKAGED_SCANS if scans is None else scans)
     provenance = dict(generator=GENERATOR, version=GENERATOR_VERSION, seed=size.seed,
                       episodes=size.episodes, objects_per_family=size.objects_per_family,
-                      frames_per_episode=size.frames_per_episode, walk=size.walk, rooms=ROOMS,
+                      frames_per_episode=size.frames_per_episode, walk=size.walk, rooms=size.rooms,
                       targets_per_house=TARGETS_PER_HOUSE,
                       scans="packaged" if scans is None else str(Path(scans).resolve()),
                       renderer="pybullet TinyRenderer", frame_size=[FRAME_HEIGHT, FRAME_WIDTH], hfov=HFOV_DEG,
@@ -224,11 +235,13 @@ def generate(out: str | Path, size: SynthSize = DEFAULT_SIZE, *, scans: str | Pa
                 for episode_id, t in plan.episodes:
                     writer.add_episode(episode_id, plan.split, plan.house_id, plan.objects[t].object_id,
                                        [o.object_id for k, o in enumerate(plan.objects) if k != t])
-            for episodes in tqdm(imap(render_house, plans), total=len(plans), desc="render houses", unit="house",
-                                 disable=not progress, dynamic_ncols=True):
-                for episode_id, records, geometry in episodes:
+            parts = max(1, workers // max(1, len(plans)))  # fewer houses than workers: each split over them
+            rendered_parts = imap(_render_part, [(plan, (k, parts)) for plan in plans for k in range(parts)])
+            for _ in tqdm(plans, desc="render houses", unit="house", disable=not progress, dynamic_ncols=True):
+                house = [next(rendered_parts) for _ in range(parts)]
+                for i, (episode_id, _, geometry) in enumerate(house[0]):
                     writer.add_geometry(episode_id, geometry)
-                    for rec in records:
+                    for rec in (rec for episodes in house for rec in episodes[i][1]):
                         writer.add_frame_record(rec)
         finally:
             if pool:

@@ -25,15 +25,14 @@ from pin_match.data.synth.shapes import Mesh
 from pin_match.data.synth.walk import Goal, Pose, floor_map
 from pin_match.data.writer import Frame, ImageFile
 
-ROOMS = 3  # rooms per house
 REACH = 0.9  # metres: the farthest from an agent standing beside it a target or look-alike's centre may be (PIN's 1 m
 # success distance less a margin, since the agent stops beside the point it matched, not beside the centre)
 
 
 @dataclass(frozen=True)
 class HousePlan:
-    """What one worker needs to render a house and its episodes: the house's annotated objects, each episode's id and
-    the index of its target among them, the walk's kind and step budget, and the clutter."""
+    """What one worker needs to render a house and its episodes: its rooms, the house's annotated objects, each
+    episode's id and the index of its target among them, the walk's kind and step budget, and the clutter."""
 
     house_id: str
     split: str
@@ -45,6 +44,7 @@ class HousePlan:
     walk: str
     staging: str
     clutter: tuple[ObjectSpec, ...] = ()  # scanned products in the house that are background (``clutter``)
+    rooms: int = 3
 
     def legend(self, target: int) -> dict[int, tuple[str, str]]:
         """Mask value -> (object id, role) for the episode whose target is object ``target``."""
@@ -167,7 +167,7 @@ class HouseWorld:
     def build(cls, plan: HousePlan) -> HouseWorld:
         r = renderer()
         r.reset()
-        house = make_house(np.random.default_rng(plan.scene_seed), ROOMS)
+        house = make_house(np.random.default_rng(plan.scene_seed), plan.rooms)
         for piece in house.pieces:
             r.add(piece.mesh, piece.texture)
         rng = np.random.default_rng(plan.seed)

@@ -20,6 +20,7 @@ class SynthSize:
     frames_per_episode: int = MAX_STEPS  # the tour's step budget: PIN's episode limit (it ends sooner, when done)
     splits: tuple[str, ...] = ("train", "val")  # the splits rendered (the others planned alike, left out)
     walk: str = "explore"  # "explore": blind to the target, one per house; "seek": heads for the target
+    rooms: int = 3  # rooms per house, in a row joined by doors
 
 
 DEFINITION_READS = ("data/agent.py", "data/compose.py", "data/geometry.py", "data/synth/__init__.py",

@@ -53,7 +53,8 @@ class SynthHouses:
                              "houses would differ, so no walk-up is rendered (rebuild the set with this install)")
         size = SynthSize(seed=int(provenance["seed"]), episodes=int(provenance["episodes"]),
                          objects_per_family=int(provenance["objects_per_family"]),
-                         frames_per_episode=int(provenance["frames_per_episode"]), walk=str(provenance["walk"]))
+                         frames_per_episode=int(provenance["frames_per_episode"]), walk=str(provenance["walk"]),
+                         rooms=int(provenance["rooms"]))
         self.fs = fs
         self.plans: dict[str, HousePlan] = {plan.house_id: plan for plan in plan_set(size, folder)[1]}
         self.cache = cache

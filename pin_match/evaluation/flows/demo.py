@@ -50,8 +50,8 @@ class DemoError(PinMatchError, ValueError):
     """A demo file (the shipped sigmas) that cannot be read, or a file a demo set's builder reads that is missing."""
 
 
-SCANNED_SIZE = SynthSize(episodes=12, objects_per_family=3, frames_per_episode=160)  # the first 160 steps of each
-# house's tour (a whole tour is about 450): a newcomer's demo in minutes; the default set and the preset tour in full
+SCANNED_SIZE = SynthSize(episodes=6, objects_per_family=3, rooms=2)  # a house a split, toured whole: a newcomer's
+# demo in minutes whose walks show their targets (the default set's houses have three rooms)
 
 
 def scanned(out: Path, seed: int, run: RunOptions, val_only: bool = False) -> FrameSet:
@@ -111,9 +111,9 @@ def reads_digest(root: Path, reads: tuple[str, ...]) -> str:
 # that render them
 SCANNED = DemoSet("scanned look-alikes", "",
                   "the val split of real scanned products (Google Scanned Objects, CC BY 4.0) in look-alike families, "
-                  "in houses of three rooms, rendered along one exploration walk per house that does not know the "
-                  f"target, cut at its first {SCANNED_SIZE.frames_per_episode} steps (a whole tour takes about 450) "
-                  "(AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
+                  f"in a house of {SCANNED_SIZE.rooms} rooms (the default set's have three), rendered along one "
+                  "exploration walk of the whole house that does not know the target, every episode of the house "
+                  "reading it (AUROC-same: target vs look-alike frames)", scanned, ("verify", "effnet", "color"),
                   "scanned.json",
                   ("data/synth/gso/*.csv", "data/synth/gso/*.md", "data/synth/gso/scans/*", *DEFINITION_READS))
 LOOKALIKES = DemoSet("look-alikes", "lookalikes",

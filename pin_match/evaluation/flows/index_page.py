@@ -20,9 +20,9 @@ from markupsafe import Markup
 from pin_match.evaluation.core.analysis import BenchRun
 from pin_match.evaluation.core.labels import CM
 from pin_match.evaluation.core.layout import BenchLayout
-from pin_match.evaluation.core.navigation import episodes_at
+from pin_match.evaluation.core.navigation import episodes_at, metrics_of
 from pin_match.evaluation.core.sizes import BAND_EDGES
-from pin_match.evaluation.core.stop import StopPolicy
+from pin_match.evaluation.core.stop import ApproachVerify, StopPolicy
 from pin_match.evaluation.flows.bench import Bench
 from pin_match.evaluation.flows.compare import Comparison
 from pin_match.evaluation.pages import html
@@ -37,6 +37,9 @@ LANDED = {"target": "the target", "same_category": "a look-alike", "other": "ano
 PICTURE_SIZE = 200
 LARGE_PX = BAND_EDGES[1]  # pixels: a target shown this large is one a matcher can be asked to recognise
 INDEX_ASSETS = "index_files"
+# the closed loop a set whose houses can be staged again shows beside PIN's first match, at the same sigma: at each
+# firing the agent walks up to the candidate, looks again from within 1 m and commits only if that look reaches sigma
+CLOSED_LOOP = ApproachVerify()
 
 
 @dataclass(frozen=True)
@@ -113,14 +116,48 @@ def stop_line(walk) -> str:
     return f"the agent stops at step {walk.stop_step:.0f}{on}: {walk.outcome}, {walk.d2g:.2f} m from the target"
 
 
-def stops(run: BenchRun, matcher: str) -> dict[str, object]:
-    """Each val episode's stop (``navigation.episodes_at``, under the stop policy the matcher was reported with) by
-    episode id; none without the frame-set's geometry."""
+def stops(run: BenchRun, matcher: str) -> pd.DataFrame:
+    """Each val episode's stop (``navigation.episodes_at``, under the stop policy the matcher was reported with),
+    indexed by episode id; none without the frame-set's geometry."""
     if run.frameset.navigation_missing is not None:
-        return {}
+        return pd.DataFrame()
     policy = StopPolicy.parse(run.reports[matcher].get("policy", "1-of-1"))
     walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher], policy)
-    return {w.episode_id: w for w in walks.itertuples()}
+    return walks.set_index("episode_id", drop=False)
+
+
+def closed_loop(run: BenchRun, matcher: str) -> pd.DataFrame:
+    """Each val episode under ``CLOSED_LOOP`` at the matcher's sigma, its walk-ups rendered and scored on demand,
+    indexed by episode id; none where the set's houses cannot be staged again (real photos, a recording) or it has
+    no geometry."""
+    if run.frameset.navigation_missing is not None or run.context.walk_ups is None:
+        return pd.DataFrame()
+    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher], CLOSED_LOOP)
+    return walks.set_index("episode_id", drop=False)
+
+
+def closed_loop_line(loops: dict[str, pd.DataFrame], first: dict[str, pd.DataFrame]) -> str | None:
+    """SR and CE under the closed loop beside the stop rule the set was reported with, and what the walk-ups turned
+    down, per matcher; None where no matcher has closed-loop walks."""
+    if all(walks.empty for walks in loops.values()):
+        return None
+    parts = []
+    for m, walks in loops.items():
+        turned = f"{int(walks.rejected.sum())} candidates turned down ({int(walks.rejected_lookalike.sum())} " \
+                 f"look-alikes, {int(walks.rejected_target.sum())} the target)"
+        loop, before = metrics_of(walks), metrics_of(first[m])
+        parts.append(f"{m} SR {loop['sr']:.1f} %, CE {loop['ce']:.1f} % (the stop rule above: SR {before['sr']:.1f} "
+                     f"%, CE {before['ce']:.1f} %), {turned}")
+    return (f"The closed loop ({CLOSED_LOOP}, the same sigma: at each firing the agent walks up to the candidate, "
+            "looks again from within 1 m and commits only where that look reaches sigma, else walks on; every step "
+            "of the detours counted): " + "; ".join(parts) + ".")
+
+
+def closed_loop_caption(walk) -> str:
+    """What the closed loop did in one episode, in a few words."""
+    looks = [text.split(":") for text in walk.rejections.split("; ")] if walk.rejected else []
+    turned = ", ".join(f"{LANDED.get(role, role)} at step {step} (close look {close})" for step, role, close in looks)
+    return f"closed loop: turned down {turned or 'nothing'}; {stop_line(walk)}"
 
 
 def first_match_roles(run: BenchRun) -> dict[str, pd.DataFrame]:
@@ -163,11 +200,12 @@ def roles_line(firsts: dict[str, pd.DataFrame], n_val: int) -> str:
 
 
 def episode_pictures(s: SetResults, assets: html.Assets, firsts: dict[str, pd.DataFrame],
+                     walks: dict[str, pd.DataFrame], loops: dict[str, pd.DataFrame],
                      episodes: int = EPISODES_SHOWN) -> list[Markup]:
     """One row per val episode, one column per matcher: the target's references, then each matcher's first frame
-    above its sigma (``firsts``), and where the agent would stop (where the frame-set has geometry)."""
+    above its sigma (``firsts``), where the agent would stop (``walks``, where the frame-set has geometry) and what
+    the closed loop did (``loops``, where its houses can be staged again)."""
     run = s.bench.run
-    walks = {m: stops(run, m) for m in run.matchers}
     val = run.frameset.episodes[run.frameset.episodes.split == "val"].set_index("episode_id", drop=False)
     val = val.loc[shown_episodes(list(val.index), [firsts[m].role for m in run.matchers], episodes)]
     sights = target_sight(run.labels)
@@ -180,7 +218,8 @@ def episode_pictures(s: SetResults, assets: html.Assets, firsts: dict[str, pd.Da
                                                                   f"target {target.object_id} ({target.category})",
                                                                   sight])]
         for m in run.matchers:
-            stop = [stop_line(walks[m][ep.episode_id])] if ep.episode_id in walks[m] else []
+            stop = [stop_line(walks[m].loc[ep.episode_id])] if ep.episode_id in walks[m].index else []
+            stop += [closed_loop_caption(loops[m].loc[ep.episode_id])] if ep.episode_id in loops[m].index else []
             if ep.episode_id not in firsts[m].index:
                 figures.append(html.figure([], [f"{m}: no frame above sigma {run.sigmas[m]:g}", *stop], "miss"))
                 continue
@@ -209,9 +248,10 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
     firsts = first_match_roles(s.bench.run)
     parts = [html.heading(s.name), html.paragraph(s.caption, "note"), html.paragraph(headline(s.bench.results)),
              html.paragraph(sight_line(s.bench.run.labels)), html.paragraph(roles_line(firsts, n_val))]
-    navigation = navigation_line(s.bench.results)
-    if navigation:
-        parts.append(html.paragraph(navigation))
+    walks = {m: stops(s.bench.run, m) for m in s.bench.run.matchers}
+    loops = {m: closed_loop(s.bench.run, m) for m in s.bench.run.matchers}
+    parts += [html.paragraph(line) for line in (navigation_line(s.bench.results), closed_loop_line(loops, walks))
+              if line]
     if s.comparisons:
         parts += [html.heading("Paired comparison", 3),
                   *(html.paragraph(line) for c in s.comparisons for line in comparison_lines(c))]
@@ -219,7 +259,7 @@ def set_section(s: SetResults, assets: html.Assets) -> list[Markup]:
               html.paragraph(f"{shown} of {n_val} val episodes (those where a matcher's first match was a "
                              "look-alike come first): the target's references, then where each matcher first fired "
                              "(green border: the target; red: anything else, or nothing).", "note"),
-              *episode_pictures(s, assets, firsts),
+              *episode_pictures(s, assets, firsts, walks, loops),
               html.heading("All metrics", 3), html.table(s.bench.joint, s.bench.caption)]
     return parts
 
