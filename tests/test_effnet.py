@@ -188,6 +188,17 @@ def test_the_batches_kept_stay_within_their_budget():
     assert computed == [0]
 
 
+def test_a_matcher_keeps_a_whole_tour_of_its_crops():
+    """Every episode of a house reads its tour again: the features of the default set's longest tour at seed 0 (501
+    frames, docs/synthetic.md; PIN's two crops a frame, as effnet's default encodes them) fit the budget, so none is
+    run through the network twice."""
+    from pin_match.matchers.common.patch import REMEMBERED_BYTES
+
+    backbone = create_matcher("effnet").backbone
+    crop = backbone.encode([np.zeros((360, 360, 3), np.uint8)]).patches.nbytes
+    assert crop == 196 * 1280 * 4 and 501 * 2 * crop <= REMEMBERED_BYTES
+
+
 @pytest.mark.skipif(shutil.which("g++") is None, reason="torch.compile on a CPU builds C++ kernels with g++")
 def test_compile_option_scores_as_the_eager_network_under_the_same_id(real_frameset):
     """``compile=True`` compiles the cut network (static shapes) and changes nothing a matcher returns: scores

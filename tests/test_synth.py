@@ -77,6 +77,16 @@ def test_make_objects_caps_each_family_in_each_split(shipped):
         make_objects(shipped, 1)
 
 
+@pytest.mark.parametrize("bad, said", [(dict(episodes=1), r"episodes must be at least 2 \(one train, one val\), got 1"),
+                                       (dict(frames_per_episode=0), "frames_per_episode must be positive, got 0"),
+                                       (dict(rooms=0), "rooms must be at least 1, got 0"),
+                                       (dict(walk="run"), "walk 'run': choose one of explore, seek")])
+def test_sizes_a_generator_cannot_make_are_refused_before_anything_is_written(tmp_path, bad, said):
+    with pytest.raises(SynthError, match=said):
+        generate(tmp_path / "fs", replace(SMALL, **bad), workers=1)
+    assert not (tmp_path / "fs").exists()
+
+
 def test_scan_splits_are_disjoint(shipped):
     specs = make_objects(shipped, 10)
     train = {s.scan for s in specs if s.split == "train"}
