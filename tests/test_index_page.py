@@ -111,7 +111,7 @@ def test_the_closed_loop_says_what_it_turned_down_and_where_it_stopped():
                    dict(episode_id="e2", outcome="not found"))
     line = closed_loop_line({"verify": loop}, {"verify": first})
     assert "approach:1" in line and line.endswith("verify SR 50.0 %, CE 0.0 % (the stop rule above: SR 0.0 %, CE "
-                                                  "50.0 %), 1 candidates turned down (1 look-alikes, 0 the target).")
+                                                  "50.0 %), candidates turned down: 1 (look-alikes 1, the target 0).")
     assert closed_loop_caption(loop.loc["e1"]) == (
         "closed loop: turned down a look-alike at step 51 (close look 0.412); the agent stops at step 187 (its goal "
         "point on: the target): success, 0.50 m from the target")

@@ -143,8 +143,8 @@ def closed_loop_line(loops: dict[str, pd.DataFrame], first: dict[str, pd.DataFra
         return None
     parts = []
     for m, walks in loops.items():
-        turned = f"{int(walks.rejected.sum())} candidates turned down ({int(walks.rejected_lookalike.sum())} " \
-                 f"look-alikes, {int(walks.rejected_target.sum())} the target)"
+        turned = f"candidates turned down: {int(walks.rejected.sum())} (look-alikes " \
+                 f"{int(walks.rejected_lookalike.sum())}, the target {int(walks.rejected_target.sum())})"
         loop, before = metrics_of(walks), metrics_of(first[m])
         parts.append(f"{m} SR {loop['sr']:.1f} %, CE {loop['ce']:.1f} % (the stop rule above: SR {before['sr']:.1f} "
                      f"%, CE {before['ce']:.1f} %), {turned}")
