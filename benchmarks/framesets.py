@@ -2,38 +2,60 @@
 
 from __future__ import annotations
 
+import shutil
 from collections.abc import Callable
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 
 from pin_match.data.frameset import MANIFEST, FrameSet
+from pin_match.data.synth.size import SynthSize
 from pin_match.data.writer import FrameSetWriter
 
 CACHE = Path("pin_match_runs") / "benchmarks"
 
 
-def cached(root: Path, build: Callable[[Path], FrameSet]) -> FrameSet:
-    """The frame-set at ``root``, built there by ``build(root)`` when it has none yet: every benchmark's one way in."""
+def cached(root: Path, build: Callable[[Path], FrameSet],
+           current: Callable[[FrameSet], bool] = lambda fs: True) -> FrameSet:
+    """The frame-set at ``root``, built there by ``build(root)`` when it has none yet or the one there is not
+    ``current`` (a synthetic set of other sizes or of another definition of its houses): every benchmark's one way
+    in."""
     if (root / MANIFEST).exists():
-        return FrameSet.load(root)
+        fs = FrameSet.load(root)
+        if current(fs):
+            return fs
+        shutil.rmtree(root)
     return build(root)
+
+
+def made_as(fs: FrameSet, size: SynthSize) -> bool:
+    """Was ``fs`` generated at ``size`` by this install's definition of a house (``generator.definition``)?"""
+    from pin_match.data.synth.generator import definition
+    from pin_match.data.synth.scans import ScanFolder
+
+    made = fs.manifest.get("provenance") or {}
+    return made.get("definition") == definition(ScanFolder.open()) and all(
+        made.get(k) == getattr(size, k) for k in ("seed", "episodes", "objects_per_family", "frames_per_episode",
+                                                  "walk", "rooms"))
 
 
 def synthetic(name: str, **settings) -> FrameSet:
     """A cached synthetic frame-set from ``pin-match generate``'s builder; ``settings`` are its keywords."""
-    from pin_match.data.synth import SynthSize, generate
+    from pin_match.data.synth import generate
 
-    return cached(CACHE / name, lambda root: generate(root, SynthSize(**settings), overwrite=True))
+    size = SynthSize(**settings)
+    return cached(CACHE / name, lambda root: generate(root, size, overwrite=True), lambda fs: made_as(fs, size))
 
 
 def demo_scanned() -> FrameSet:
     """The demo's scanned set, its val split alone (one house's whole tour, read by 3 episodes), as ``pin-match
     demo`` renders it at shipped sigmas."""
-    from pin_match.evaluation.flows.demo import scanned
+    from pin_match.evaluation.flows.demo import SCANNED_SIZE, scanned
     from pin_match.scoring import RunOptions
 
-    return cached(CACHE / "demo_scanned_val", lambda root: scanned(root, 0, RunOptions(progress=False), val_only=True))
+    return cached(CACHE / "demo_scanned_val", lambda root: scanned(root, 0, RunOptions(progress=False), val_only=True),
+                  lambda fs: made_as(fs, replace(SCANNED_SIZE, seed=0)))
 
 
 def procedural(n_frames: int, frames_per_episode: int = 100, seed: int = 0) -> FrameSet:

@@ -76,6 +76,25 @@ def test_a_cached_frameset_is_built_once_then_loaded(tmp_path):
     again = cached(tmp_path / "p", build)
     assert builds == [tmp_path / "p"] and len(again.frames) == 2
     assert again.fingerprint == first.fingerprint
+    # one no longer current (a synthetic set of another definition of its houses) is built again, not read stale
+    cached(tmp_path / "p", build, current=lambda fs: fs.fingerprint != first.fingerprint)
+    assert builds == [tmp_path / "p"] * 2
+
+
+def test_a_synthetic_set_is_current_only_at_its_sizes_and_this_install_s_houses():
+    from types import SimpleNamespace
+
+    from benchmarks.framesets import made_as
+    from pin_match.data.synth import SynthSize
+    from pin_match.data.synth.generator import definition
+    from pin_match.data.synth.scans import ScanFolder
+
+    size = SynthSize(episodes=6, rooms=2)
+    made = dict(seed=0, episodes=6, objects_per_family=5, frames_per_episode=1000, walk="explore", rooms=2,
+                definition=definition(ScanFolder.open()))
+    assert made_as(SimpleNamespace(manifest={"provenance": made}), size)
+    assert not made_as(SimpleNamespace(manifest={"provenance": made | {"rooms": 3}}), size)
+    assert not made_as(SimpleNamespace(manifest={"provenance": made | {"definition": "0123"}}), size)
 
 
 def test_fastest_interleaves_the_sides_and_keeps_each_ones_fastest_run(monkeypatch):
