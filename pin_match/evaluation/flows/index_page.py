@@ -116,24 +116,27 @@ def stop_line(walk) -> str:
     return f"the agent stops at step {walk.stop_step:.0f}{on}: {walk.outcome}, {walk.d2g:.2f} m from the target"
 
 
-def stops(run: BenchRun, matcher: str) -> pd.DataFrame:
-    """Each val episode's stop (``navigation.episodes_at``, under the stop policy the matcher was reported with),
-    indexed by episode id; none without the frame-set's geometry."""
-    if run.frameset.navigation_missing is not None:
-        return pd.DataFrame()
-    policy = StopPolicy.parse(run.reports[matcher].get("policy", "1-of-1"))
+def walks_under(run: BenchRun, matcher: str, policy: StopPolicy) -> pd.DataFrame:
+    """Each val episode's walk under ``policy`` at the matcher's sigma (``navigation.episodes_at``; an approach-verify
+    policy's walk-ups rendered and scored on demand), indexed by episode id."""
     walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher], policy)
     return walks.set_index("episode_id", drop=False)
 
 
+def stops(run: BenchRun, matcher: str) -> pd.DataFrame:
+    """Each val episode's stop under the stop policy the matcher was reported with; none without the frame-set's
+    geometry."""
+    if run.frameset.navigation_missing is not None:
+        return pd.DataFrame()
+    return walks_under(run, matcher, StopPolicy.parse(run.reports[matcher].get("policy", "1-of-1")))
+
+
 def closed_loop(run: BenchRun, matcher: str) -> pd.DataFrame:
-    """Each val episode under ``CLOSED_LOOP`` at the matcher's sigma, its walk-ups rendered and scored on demand,
-    indexed by episode id; none where the set's houses cannot be staged again (real photos, a recording) or it has
-    no geometry."""
+    """Each val episode under ``CLOSED_LOOP``; none where the set's houses cannot be staged again (real photos, a
+    recording) or it has no geometry."""
     if run.frameset.navigation_missing is not None or run.context.walk_ups is None:
         return pd.DataFrame()
-    walks = episodes_at(run.context.placements(run.tables[matcher], "val"), run.sigmas[matcher], CLOSED_LOOP)
-    return walks.set_index("episode_id", drop=False)
+    return walks_under(run, matcher, CLOSED_LOOP)
 
 
 def closed_loop_line(loops: dict[str, pd.DataFrame], first: dict[str, pd.DataFrame]) -> str | None:
